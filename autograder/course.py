@@ -1,0 +1,40 @@
+"""Where an assignment's pieces live in this repository (or in the Gradescope bundle built from it)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+REPO = Path(os.environ.get("RLCOURSE_REPO", Path(__file__).resolve().parents[1]))
+
+
+def assignment_ids() -> list[str]:
+    """Assignments that have a solution notebook, in order."""
+    return sorted(p.name for p in (REPO / "solutions").iterdir() if (p / f"{p.name}.ipynb").exists())
+
+
+def solution_notebook(assignment: str) -> Path:
+    return REPO / "solutions" / assignment / f"{assignment}.ipynb"
+
+
+def release_notebook(assignment: str) -> Path:
+    return REPO / "assignments" / assignment / f"{assignment}.ipynb"
+
+
+def suite_dir(assignment: str) -> Path:
+    return REPO / "autograder" / "suites" / assignment
+
+
+def samples_dir(assignment: str) -> Path:
+    return REPO / "autograder" / "samples" / assignment
+
+
+def check_assignment(assignment: str) -> None:
+    """Fail early, with the list of known ids, on a mistyped assignment id."""
+    if not release_notebook(assignment).exists() or not suite_dir(assignment).is_dir():
+        known = ", ".join(i for i in assignment_ids() if suite_dir(i).is_dir())
+        raise SystemExit(f"unknown or ungradable assignment {assignment!r}; gradable ones: {known}")
+
+
+def secret_paths() -> list[Path]:
+    """What a sandbox must never read: solutions, suites and samples."""
+    return [REPO / "solutions", REPO / "autograder" / "suites", REPO / "autograder" / "samples"]

@@ -1,0 +1,79 @@
+"""What hidden suites import: the ``stub`` marker and strict comparisons.
+
+Comparisons fail with messages written for the student, since those messages
+are the feedback. They are strict on purpose: the type must be exactly right
+(an ``ndarray`` subclass or an object that claims equality with everything is
+not an array), shapes and dtype kinds must match, and NaN or inf never pass.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+
+_REAL_TYPES = (int, float, np.integer, np.floating)
+
+
+def stub(name: str, points: float, hint: str | None = None) -> Callable:
+    """Mark a test as checking stub ``name`` and worth ``points``; ``hint`` is shown when it fails."""
+    return pytest.mark.stub(name=name, points=points, hint=hint)
+
+
+def describe(value: Any) -> str:
+    """A short description of a value for feedback messages."""
+    if isinstance(value, np.ndarray):
+        return f"{type(value).__name__} of shape {value.shape} and dtype {value.dtype}"
+    text = repr(value)
+    return f"{type(value).__name__} {text[:60]}{'…' if len(text) > 60 else ''}"
+
+
+def _fail(message: str) -> None:
+    raise AssertionError(message)
+
+
+def check_array(got: Any, want: Any, rtol: float = 1e-6, atol: float = 1e-8, name: str = "the result") -> None:
+    """``got`` is a plain numpy array like ``want``: same shape, dtype kind, finite where ``want`` is, close."""
+    want = np.asarray(want)
+    if type(got) is not np.ndarray:
+        _fail(f"{name} should be a numpy array, got {describe(got)}")
+    if got.shape != want.shape:
+        _fail(f"{name} has shape {got.shape}, expected {want.shape}")
+    kinds = {"f": "floating-point", "i": "integer", "u": "unsigned integer", "b": "boolean", "c": "complex"}
+    same_kind = got.dtype.kind == want.dtype.kind or {got.dtype.kind, want.dtype.kind} <= {"i", "u"}
+    if not same_kind:
+        _fail(f"{name} has dtype {got.dtype}; expected {kinds.get(want.dtype.kind, want.dtype.kind)} values")
+    if got.dtype.kind in "fc":
+        bad = ~np.isfinite(got) & np.isfinite(want)
+        if bad.any():
+            _fail(f"{name} contains NaN or inf at {int(bad.sum())} position(s), e.g. index {tuple(np.argwhere(bad)[0])}")
+    if got.dtype.kind == "b" or want.dtype.kind == "b":
+        wrong = got != want
+    else:
+        wrong = ~np.isclose(got, want, rtol=rtol, atol=atol, equal_nan=True)
+    if wrong.any():
+        index = tuple(int(i) for i in np.argwhere(wrong)[0]) if got.ndim else ()
+        worst = float(np.max(np.abs(got.astype(complex) - want.astype(complex))))
+        _fail(f"{name} is wrong at {int(wrong.sum())} of {wrong.size} position(s); e.g. at index {index} got "
+              f"{got[index]!r}, expected {want[index]!r} (largest error {worst:.3g})")
+
+
+def check_scalar(got: Any, want: float, rtol: float = 1e-6, atol: float = 1e-8, name: str = "the result") -> None:
+    """``got`` is one finite real number (Python or numpy, not bool, not an array) close to ``want``."""
+    if isinstance(got, bool) or not isinstance(got, _REAL_TYPES) or type(got).__module__ not in ("builtins", "numpy"):
+        _fail(f"{name} should be a number, got {describe(got)}")
+    value = float(got)
+    if not np.isfinite(value):
+        _fail(f"{name} is {value}, expected a finite number close to {want:.6g}")
+    if not np.isclose(value, float(want), rtol=rtol, atol=atol):
+        _fail(f"{name} is {value:.6g}, expected {float(want):.6g}")
+
+
+def check_tensor(got: Any, want: Any, rtol: float = 1e-5, atol: float = 1e-7, name: str = "the result") -> None:
+    """``got`` is a torch tensor (not a subclass) matching ``want`` as :func:`check_array` would."""
+    import torch
+
+    if type(got) is not torch.Tensor:
+        _fail(f"{name} should be a torch tensor, got {describe(got)}")
+    want_np = want.detach().numpy() if isinstance(want, torch.Tensor) else np.asarray(want)
+    check_array(got.detach().numpy(), want_np, rtol, atol, name)
