@@ -54,7 +54,7 @@ def save_mp4(frames: np.ndarray, path: str | Path, fps: int = 25) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    imageio.mimwrite(path, list(frames), fps=fps, codec="libx264", macro_block_size=8, output_params=["-pix_fmt", "yuv420p"])
+    imageio.mimwrite(path, list(frames), fps=fps, codec="libx264", macro_block_size=8, pixelformat="yuv420p")
     return path
 
 

@@ -1,0 +1,140 @@
+"""Command line of the course tools: ``python -m autograder <command> ...``.
+
+  grade ID NOTEBOOK --out DIR        grade one submission; per-stub summary, results.json, feedback.md
+  batch ID FOLDER --out DIR --jobs N grade a folder (resumable), write gradebook.csv
+  demo                               grade the sample submissions of every assignment (the README's main job)
+  gradescope ID [--out ZIP]          build the Gradescope autograder bundle
+  run NOTEBOOK [-p NAME=VALUE ...]   execute a notebook with parameters under a time budget
+  assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
+  student-release OUT                build the student-only tree
+  samples ID                         regenerate the sample submissions of an assignment
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _cmd_grade(args: argparse.Namespace) -> int:
+    from autograder.grader import Grader
+    from autograder.report import summary_lines, write_outputs
+
+    grader = Grader(args.assignment, hidden=[args.out])
+    try:
+        result = grader.grade(args.notebook)
+    finally:
+        grader.close()
+    write_outputs(result, args.out)
+    _warn_isolation(result.isolation)
+    print("\n".join(summary_lines(result)))
+    print(f"wrote {args.out / 'results.json'} and {args.out / 'feedback.md'}")
+    return 0
+
+
+def _warn_isolation(level: str) -> None:
+    if level == "none":
+        print("warning: no namespaces available here; the sandbox uses resource limits only (isolation is partial)",
+              file=sys.stderr)
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from autograder.batch import GRADEBOOK_NAME, run_batch
+
+    results = run_batch(args.assignment, args.folder, args.out, jobs=args.jobs)
+    graded = sum(1 for r in results if not r.error)
+    print(f"{len(results)} submissions ({graded} graded, {len(results) - graded} ungradable); "
+          f"gradebook: {args.out / GRADEBOOK_NAME}")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from autograder.nbrun import parse_value, run_notebook
+
+    parameters = dict(item.split("=", 1) for item in args.parameter)
+    report = run_notebook(args.notebook, {k: parse_value(v) for k, v in parameters.items()}, timeout=args.timeout,
+                          until_first_stub=args.until_first_stub, output=args.output)
+    print(report.describe(args.notebook))
+    return 0 if report.ok else 1
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from autograder.demo import run_demo
+
+    return run_demo(args.out, jobs=args.jobs)
+
+
+def _cmd_gradescope(args: argparse.Namespace) -> int:
+    from autograder.gradescope import build_bundle
+
+    print(f"wrote {build_bundle(args.assignment, args.out)}")
+    return 0
+
+
+def _cmd_assignments(args: argparse.Namespace) -> int:
+    from autograder.release import generate_assignments
+
+    generate_assignments(args.ids or None)
+    return 0
+
+
+def _cmd_student_release(args: argparse.Namespace) -> int:
+    from autograder.release import build_student_release
+
+    print(f"student release written to {build_student_release(args.out)}")
+    return 0
+
+
+def _cmd_samples(args: argparse.Namespace) -> int:
+    from autograder.samples import write_samples
+
+    for path in write_samples(args.assignment):
+        print(path)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m autograder", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("grade", help="grade one submission")
+    p.add_argument("assignment")
+    p.add_argument("notebook", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(fn=_cmd_grade)
+    p = sub.add_parser("batch", help="grade a folder of submissions")
+    p.add_argument("assignment")
+    p.add_argument("folder", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--jobs", type=int, default=2)
+    p.set_defaults(fn=_cmd_batch)
+    p = sub.add_parser("demo", help="grade every assignment's sample submissions")
+    p.add_argument("--out", type=Path, default=Path("build/demo"))
+    p.add_argument("--jobs", type=int, default=2)
+    p.set_defaults(fn=_cmd_demo)
+    p = sub.add_parser("gradescope", help="build the Gradescope autograder zip")
+    p.add_argument("assignment")
+    p.add_argument("--out", type=Path, default=None)
+    p.set_defaults(fn=_cmd_gradescope)
+    p = sub.add_parser("run", help="execute a notebook with parameters")
+    p.add_argument("notebook", type=Path)
+    p.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE")
+    p.add_argument("--timeout", type=float, default=600)
+    p.add_argument("--until-first-stub", action="store_true")
+    p.add_argument("--output", type=Path, default=None, help="write the executed notebook here")
+    p.set_defaults(fn=_cmd_run)
+    p = sub.add_parser("assignments", help="regenerate student notebooks")
+    p.add_argument("ids", nargs="*")
+    p.set_defaults(fn=_cmd_assignments)
+    p = sub.add_parser("student-release", help="build the student-only tree")
+    p.add_argument("out", type=Path)
+    p.set_defaults(fn=_cmd_student_release)
+    p = sub.add_parser("samples", help="regenerate sample submissions")
+    p.add_argument("assignment")
+    p.set_defaults(fn=_cmd_samples)
+    args = parser.parse_args(argv)
+    return args.fn(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,153 @@
+"""Grade a folder of submissions in parallel, resumably, into per-submission folders and a gradebook.
+
+Accepted layouts of the input folder: a flat folder of notebooks; nbgrader's
+``submitted/<student>/<assignment>/`` (the folder itself or the course root that
+holds it); an unzipped Gradescope export (one folder per submission). Each
+entry of the folder is one submission, named by its file or folder name.
+"""
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import re
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm.auto import tqdm
+
+from autograder import course
+from autograder.grader import GradeResult, Grader
+from autograder.notebook import NotebookError, find_stubs, read_notebook, read_submission, release_plan
+from autograder.report import RESULT_NAME, result_from_dict, write_gradebook, write_outputs
+
+GRADEBOOK_NAME = "gradebook.csv"
+
+
+@dataclass
+class Entry:
+    name: str
+    notebook: Path | None
+    note: str = ""
+    problem: str = ""
+
+
+def _safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "submission"
+
+
+def _notebooks_in(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.rglob("*.ipynb") if ".ipynb_checkpoints" not in p.parts and p.is_file())
+
+
+def _choose(name: str, notebooks: list[Path], assignment: str, expected: list[str]) -> Entry:
+    if not notebooks:
+        return Entry(name, None, problem="no notebook (.ipynb) in this submission")
+    if len(notebooks) == 1:
+        return Entry(name, notebooks[0])
+    named = [p for p in notebooks if p.stem == assignment]
+    if len(named) == 1:
+        chosen = named[0]
+    else:  # the notebook in which the most stubs can be found
+        def stubs_found(path: Path) -> int:
+            try:
+                return len(find_stubs(read_submission(path)[0], expected)[0])
+            except (NotebookError, OSError):
+                return -1
+        chosen = max(notebooks, key=stubs_found)
+    others = ", ".join(p.name for p in notebooks if p != chosen)
+    return Entry(name, chosen, note=f"several notebooks were submitted; graded {chosen.name} (not {others})")
+
+
+def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
+    """One entry per submission in ``folder`` (see the module docstring for the layouts)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise SystemExit(f"{folder} is not a folder of submissions")
+    if (folder / "submitted").is_dir():
+        folder = folder / "submitted"
+    entries = []
+    for child in sorted(folder.iterdir()):
+        if child.name.startswith(".") or child.name in ("submission_metadata.yml",):
+            continue
+        if child.is_file() and child.suffix == ".ipynb":
+            entries.append(Entry(child.stem, child))
+        elif child.is_dir():
+            inner = child / assignment if (child / assignment).is_dir() else child
+            entries.append(_choose(child.name, _notebooks_in(inner), assignment, expected))
+    names = [e.name for e in entries]
+    for e in entries:  # keep folder names unique on disk
+        e.name = _safe_name(e.name) if names.count(e.name) == 1 else _safe_name(f"{e.name}_{id(e)}")
+    return entries
+
+
+# ------------------------------------------------------------------ worker processes
+
+_grader: Grader | None = None
+
+
+def _init(assignment: str, hidden: list[str]) -> None:
+    global _grader
+    _grader = Grader(assignment, hidden=[Path(p) for p in hidden])
+
+
+def _grade_one(entry: Entry, out_dir: str) -> str:
+    result = _grader.grade(entry.notebook, name=entry.name)
+    if entry.note:
+        result.notes.insert(0, entry.note)
+    write_outputs(result, Path(out_dir) / entry.name)
+    return entry.name
+
+
+def _load(out_dir: Path, name: str) -> GradeResult | None:
+    path = out_dir / name / RESULT_NAME
+    try:
+        return result_from_dict(json.loads(path.read_text()))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _ungradable(assignment: str, entry: Entry, reason: str) -> GradeResult:
+    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason)
+
+
+def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True) -> list[GradeResult]:
+    """Grade every submission not yet graded in ``out_dir``, then write the gradebook of all of them."""
+    out_dir = Path(out_dir)
+    course.check_assignment(assignment)
+    expected = [c.label for c in release_plan(read_notebook(course.release_notebook(assignment))) if c.kind == "stub"]
+    entries = discover(folder, assignment, expected)
+    todo = [e for e in entries if e.notebook is not None and _load(out_dir, e.name) is None]
+    for e in entries:
+        if e.notebook is None and _load(out_dir, e.name) is None:
+            write_outputs(_ungradable(assignment, e, e.problem), out_dir / e.name)
+    hidden = [str(Path(folder).resolve()), str(out_dir.resolve())]
+    bar = tqdm(total=len(entries), initial=len(entries) - len(todo), desc=f"grading {assignment}",
+               unit="submission", disable=not progress)
+    attempts = 0
+    while todo and attempts < 3:
+        attempts += 1
+        try:
+            with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=_init,
+                                     initargs=(assignment, hidden)) as pool:
+                futures = {pool.submit(_grade_one, e, str(out_dir)): e for e in todo}
+                for future in as_completed(futures):
+                    entry = futures[future]
+                    try:
+                        future.result()
+                    except BrokenProcessPool:
+                        raise
+                    except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission
+                        write_outputs(_ungradable(assignment, entry, f"internal grader error: {err}"), out_dir / entry.name)
+                    bar.update(1)
+        except BrokenProcessPool:
+            pass  # a grading process died; the finished results are on disk, retry the rest
+        todo = [e for e in todo if _load(out_dir, e.name) is None]
+    for e in todo:
+        write_outputs(_ungradable(assignment, e, "the grader process died repeatedly on this submission"), out_dir / e.name)
+        bar.update(1)
+    bar.close()
+    results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
+    write_gradebook(results, out_dir / GRADEBOOK_NAME)
+    return results

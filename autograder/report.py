@@ -1,0 +1,145 @@
+"""Everything graded turns into files here: Gradescope JSON, student feedback, the gradebook.
+
+All writes are atomic (a temporary file renamed into place), so a batch that is
+killed at any moment never leaves a half-written result behind.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Iterable
+
+from autograder.grader import GradeResult, StubResult, TestOutcome
+
+RESULT_NAME, FEEDBACK_NAME, GRADESCOPE_NAME = "result.json", "feedback.md", "results.json"
+
+
+def atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _fmt(points: float) -> str:
+    return f"{points:g}"
+
+
+def _stub_output(stub: StubResult) -> str:
+    lines = []
+    for test in stub.tests:
+        mark = "✓" if test.passed else "✗"
+        lines.append(f"{mark} {test.name} ({_fmt(test.points if test.passed else 0)}/{_fmt(test.points)})")
+        if not test.passed:
+            lines.append(f"    {test.message}")
+            if test.hint:
+                lines.append(f"    hint: {test.hint}")
+    return "\n".join(lines)
+
+
+def gradescope_results(result: GradeResult) -> dict[str, Any]:
+    """Gradescope's ``results.json``: one test entry per stub, with each check listed in its output."""
+    tests = []
+    for number, stub in enumerate(result.stubs, start=1):
+        tests.append({
+            "name": stub.name, "number": str(number), "score": stub.score, "max_score": stub.max_score,
+            "status": "passed" if stub.tests and stub.score == stub.max_score else "failed",
+            "output": _stub_output(stub), "visibility": "visible",
+        })
+    return {
+        "score": result.score, "execution_time": round(result.seconds, 2), "output": _overall_output(result),
+        "visibility": "visible", "stdout_visibility": "hidden", "tests": tests,
+    }
+
+
+def _overall_output(result: GradeResult) -> str:
+    parts = []
+    if result.error:
+        parts.append(f"This submission could not be graded automatically: {result.error}")
+    parts += result.notes
+    if result.manual:
+        total = sum(points for _, points in result.manual)
+        parts.append(f"Written answers graded by hand later ({_fmt(total)} points): "
+                     + ", ".join(f"{gid} ({_fmt(points)})" for gid, points in result.manual))
+    return "\n".join(parts)
+
+
+def feedback_markdown(result: GradeResult) -> str:
+    """The per-student feedback file: per stub, what passed, what failed and a hint."""
+    out = [f"# Feedback: {result.assignment} · {result.submission}", "",
+           f"**Automatic score: {_fmt(result.score)} / {_fmt(result.max_score)}**", ""]
+    if result.error:
+        out += [f"> This submission could not be graded automatically: {result.error}", ""]
+    for note in result.notes:
+        out.append(f"- note: {note}")
+    if result.notes:
+        out.append("")
+    for stub in result.stubs:
+        out += [f"## `{stub.name}`: {_fmt(stub.score)} / {_fmt(stub.max_score)}", ""]
+        for test in stub.tests:
+            if test.passed:
+                out.append(f"- ✓ {test.name}")
+            else:
+                out.append(f"- ✗ {test.name}: {test.message}")
+                if test.hint:
+                    out.append(f"  - *hint:* {test.hint}")
+        out.append("")
+    if result.manual:
+        out += ["## Written answers (graded by hand)", ""]
+        out += [f"- `{gid}`: {_fmt(points)} point(s), pending" for gid, points in result.manual]
+        out.append("")
+    return "\n".join(out)
+
+
+def result_to_dict(result: GradeResult) -> dict[str, Any]:
+    data = asdict(result)
+    data.update(score=result.score, max_score=result.max_score)
+    return data
+
+
+def result_from_dict(data: dict[str, Any]) -> GradeResult:
+    stubs = [StubResult(s["name"], [TestOutcome(**t) for t in s["tests"]], s.get("note", "")) for s in data["stubs"]]
+    return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
+                       data["notes"], data["error"], data["isolation"], data["seconds"])
+
+
+def write_outputs(result: GradeResult, out_dir: Path) -> None:
+    """``results.json`` (Gradescope), ``feedback.md`` and ``result.json`` (the full record) into ``out_dir``.
+
+    The full record is written last: its presence marks the submission as graded.
+    """
+    atomic_write(out_dir / GRADESCOPE_NAME, json.dumps(gradescope_results(result), indent=2, ensure_ascii=False))
+    atomic_write(out_dir / FEEDBACK_NAME, feedback_markdown(result))
+    atomic_write(out_dir / RESULT_NAME, json.dumps(result_to_dict(result), indent=2, ensure_ascii=False))
+
+
+def summary_lines(result: GradeResult) -> list[str]:
+    """A short per-stub table for the terminal."""
+    width = max([len(s.name) for s in result.stubs] + [4])
+    lines = [f"{result.assignment} · {result.submission}: {_fmt(result.score)}/{_fmt(result.max_score)}"
+             + (f"  (ungradable: {result.error})" if result.error else "")]
+    for stub in result.stubs:
+        failed = [t for t in stub.tests if not t.passed]
+        why = f"  {failed[0].message[:90]}" if failed else ""
+        lines.append(f"  {stub.name:<{width}}  {_fmt(stub.score):>4}/{_fmt(stub.max_score):<4}{why}")
+    return lines
+
+
+def write_gradebook(results: Iterable[GradeResult], path: Path) -> None:
+    """The CSV gradebook: one row per submission, ungradable ones included with their reason."""
+    results = list(results)
+    stubs = list(dict.fromkeys(s.name for r in results for s in r.stubs))
+    rows = [["submission", "score", "max_score", "percent", *stubs, "status", "reason"]]
+    for r in sorted(results, key=lambda r: r.submission):
+        per = {s.name: s.score for s in r.stubs}
+        percent = 100 * r.score / r.max_score if r.max_score else 0.0
+        rows.append([r.submission, _fmt(r.score), _fmt(r.max_score), f"{percent:.1f}",
+                     *[_fmt(per.get(s, 0)) for s in stubs], "ungradable" if r.error else "graded", r.error or ""])
+    tmp = path.with_name(f".{path.name}.tmp")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tmp.open("w", newline="", encoding="utf-8") as f:
+        csv.writer(f).writerows(rows)
+    os.replace(tmp, path)

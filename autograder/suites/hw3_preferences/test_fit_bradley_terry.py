@@ -1,0 +1,70 @@
+"""Hidden tests of hw3's Bradley–Terry fits (gradient descent and Hunter's MM)."""
+import numpy as np
+from scipy.stats import spearmanr
+
+from autograder.suite import check_array, stub
+from rlcourse.preferences import load_items, sample_labels
+
+GD_HINT = ("Gradient descent on the mean loss from u = 0 with step n_items; stop when max |grad| < tol; "
+           "return the utilities minus their mean.")
+MM_HINT = ("pi_k <- W_k / sum_l N_kl / (pi_k + pi_l), with W_k = wins + ties / 2; renormalise every step and return "
+           "log(pi) centred to mean zero.")
+
+
+def _random_instance(rng, n_items=15, m=1500):
+    u = rng.normal(size=n_items)
+    u -= u.mean()
+    i = rng.integers(0, n_items, m)
+    j = (i + rng.integers(1, n_items, m)) % n_items
+    return u, i, j, sample_labels(u[i] - u[j], 0.3, rng)
+
+
+def _shipped_recovery(fit):
+    d = load_items()
+    got = fit(d["n_items"], d["i"], d["j"], d["mu"])
+    assert isinstance(got, np.ndarray) and got.shape == (d["n_items"],), \
+        f"expected {d['n_items']} utilities, got {type(got).__name__} of shape {np.shape(got)}"
+    assert abs(got.mean()) < 1e-8, f"the utilities should have mean zero, got mean {got.mean():.3g}"
+    rho = spearmanr(got, d["utilities"]).statistic
+    assert rho >= 0.95, f"Spearman correlation with the hidden utilities is {rho:.3f}, expected at least 0.95"
+    return got, d
+
+
+@stub("fit_bradley_terry", points=2, hint=GD_HINT)
+def test_gd_recovers_shipped_utilities(student, reference):
+    """On the shipped items: mean zero, Spearman >= 0.95, and the maximum-likelihood values"""
+    got, d = _shipped_recovery(student.fit_bradley_terry)
+    check_array(got, reference.fit_bradley_terry_mm(d["n_items"], d["i"], d["j"], d["mu"]), atol=1e-4,
+                name="the fitted utilities")
+
+
+@stub("fit_bradley_terry", points=1, hint=GD_HINT)
+def test_gd_random_instance(student, reference, rng):
+    """A random instance with ties: the maximum-likelihood utilities"""
+    _, i, j, mu = _random_instance(rng)
+    check_array(student.fit_bradley_terry(15, i, j, mu), reference.fit_bradley_terry_mm(15, i, j, mu), atol=1e-4)
+
+
+@stub("fit_bradley_terry_mm", points=2, hint=MM_HINT)
+def test_mm_recovers_shipped_utilities(student, reference):
+    """On the shipped items: mean zero, Spearman >= 0.95, and the maximum-likelihood values"""
+    got, d = _shipped_recovery(student.fit_bradley_terry_mm)
+    check_array(got, reference.fit_bradley_terry(d["n_items"], d["i"], d["j"], d["mu"]), atol=1e-4,
+                name="the fitted utilities")
+
+
+@stub("fit_bradley_terry_mm", points=1, hint=MM_HINT)
+def test_mm_random_instance_with_ties(student, reference, rng):
+    """A random instance where ties are frequent: ties count half a win"""
+    u, i, j, _ = _random_instance(rng, 10, 1200)
+    mu = sample_labels(u[i] - u[j], 1.0, rng)           # about 45% ties
+    check_array(student.fit_bradley_terry_mm(10, i, j, mu), reference.fit_bradley_terry(10, i, j, mu), atol=1e-4)
+
+
+@stub("fit_bradley_terry_mm", points=1, hint="Both fits maximise the same likelihood: they must agree.")
+def test_mm_agrees_with_students_gd(student, rng):
+    """Your two fits agree with each other on a random instance"""
+    _, i, j, mu = _random_instance(rng, 12, 1000)
+    gd = student.fit_bradley_terry(12, i, j, mu)
+    assert isinstance(gd, np.ndarray), "fit_bradley_terry must work first"
+    check_array(student.fit_bradley_terry_mm(12, i, j, mu), gd, atol=1e-4, name="the MM utilities")

@@ -1,0 +1,76 @@
+"""Hidden tests of hw3's rucb (dueling bandits)."""
+import numpy as np
+from scipy.special import expit
+
+from autograder.suite import stub
+from rlcourse.preferences import dueling_regret
+
+HINT = ("U = W/N + sqrt(alpha ln t / N) (1 where N = 0, 1/2 on the diagonal); candidates c with U[c, j] >= 1/2 for all j; "
+        "challenger d = argmax_j U[j, c]; duel (c, d) through env.duel and update W.")
+
+RUN = "rucb(DuelingBandit(P, seed), horizon, 0.51, np.random.default_rng(seed))"
+
+
+def _bt_instance(rng, k):
+    u = np.sort(rng.normal(size=k))[::-1].copy()
+    u[0] += 0.3                                          # a clear best arm
+    perm = rng.permutation(k)
+    u = u[perm]
+    return expit(u[:, None] - u[None, :]), int(np.argmax(u))
+
+
+def _cyclic_instance():
+    """Arm 0 beats everyone; arms 1..4 form a cycle (no strong stochastic transitivity among them)."""
+    P = np.full((5, 5), 0.5)
+    for j in range(1, 5):
+        P[0, j], P[j, 0] = 0.7, 0.3
+    for a, b in ((1, 2), (2, 3), (3, 4), (4, 1)):
+        P[a, b], P[b, a] = 0.9, 0.1
+    for a, b in ((1, 3), (2, 4)):
+        P[a, b], P[b, a] = 0.5 + 1e-3, 0.5 - 1e-3
+    return P
+
+
+def _uniform_regret(P, horizon):
+    k = len(P)
+    off = ~np.eye(k, dtype=bool)
+    a, b = np.nonzero(off)
+    return horizon * dueling_regret(P, np.stack([a, b], 1)).mean()
+
+
+def _run(student, P, horizon, seed):
+    pairs = student.eval(RUN, P=P, horizon=horizon, seed=seed, timeout=60)
+    assert isinstance(pairs, np.ndarray) and pairs.shape == (horizon, 2), \
+        f"rucb should return an array of shape ({horizon}, 2), got {type(pairs).__name__} {np.shape(pairs)}"
+    assert pairs.dtype.kind in "iu", f"the duels should be integer arm indices, got dtype {pairs.dtype}"
+    assert pairs.min() >= 0 and pairs.max() < len(P), "arm indices out of range"
+    return pairs
+
+
+@stub("rucb", points=1, hint=HINT)
+def test_plays_through_the_environment(student, rng):
+    """Returns (horizon, 2) integer duels and calls env.duel once per step"""
+    P, _ = _bt_instance(rng, 4)
+    n = student.eval("(lambda env: (rucb(env, 300, 0.51, np.random.default_rng(0)), env.n_duels)[1])(DuelingBandit(P, 0))",
+                     P=P, timeout=60)
+    assert n == 300, f"rucb should duel exactly once per step through env.duel (300 steps), it dueled {n} times"
+    _run(student, P, 300, 0)
+
+
+@stub("rucb", points=2, hint=HINT)
+def test_regret_well_below_uniform(student, rng):
+    """6 Bradley–Terry arms, 2,000 duels, 2 seeds: regret under 40% of uniform pairs'"""
+    P, _ = _bt_instance(rng, 6)
+    regret = np.mean([dueling_regret(P, _run(student, P, 2000, s)).sum() for s in range(2)])
+    base = _uniform_regret(P, 2000)
+    assert regret < 0.4 * base, f"cumulative regret {regret:.0f} is not well below uniform pairs' {base:.0f}"
+
+
+@stub("rucb", points=2, hint=HINT)
+def test_converges_to_condorcet_winner(student, rng):
+    """Late duels concentrate on the Condorcet winner, also when the other arms cycle"""
+    for name, (P, best) in (("a Bradley–Terry instance", _bt_instance(rng, 5)), ("a cyclic instance", (_cyclic_instance(), 0))):
+        pairs = _run(student, P, 2500, 3)
+        share = np.mean(pairs[-800:] == best)
+        assert share > 0.7, (f"on {name}, only {share:.0%} of the arms played in the last 800 duels are the Condorcet "
+                             f"winner (arm {best}); RUCB should be dueling it against itself by then")

@@ -1,0 +1,108 @@
+"""Hidden tests of hw3's condorcet_winner, copeland_winner and borda_winner."""
+import numpy as np
+from scipy.special import expit
+
+from autograder.suite import stub
+
+C_HINT = "The Condorcet winner beats every other arm with P > 1/2 strictly; return None when there is none."
+CO_HINT = "Copeland: count, for each arm (row), the other arms it beats with P[i, j] > 1/2 strictly; argmax."
+B_HINT = "Borda: for each arm (row), the mean of P[i, j] over the K - 1 other arms j; argmax (smallest index on ties)."
+
+
+def _from_upper(upper, k):
+    P = np.full((k, k), 0.5)
+    for (a, b), p in upper.items():
+        P[a, b], P[b, a] = p, 1.0 - p
+    return P
+
+
+# Condorcet: none; Copeland: 0 (3 wins); Borda: 1 (mean 0.70).
+DIFFER = _from_upper({(0, 1): .55, (0, 2): .55, (0, 3): .55, (0, 4): .40, (1, 2): .45, (1, 3): .95, (1, 4): .95,
+                      (2, 3): .40, (2, 4): .60, (3, 4): .60}, 5)
+# Arm 2 beats 0 and 3 and ties arm 1 exactly: no Condorcet winner (ties do not count as wins).
+TIED = _from_upper({(0, 1): .3, (0, 2): .4, (0, 3): .6, (1, 2): .5, (1, 3): .45, (2, 3): .8}, 4)
+# Strict wins: arm 1 has two; counting P = 1/2 as a win would give arms 0 and 1 three each (and pick 0).
+COPELAND_TIES = _from_upper({(0, 1): .5, (0, 2): .5, (0, 3): .7, (1, 2): .6, (1, 3): .6, (2, 3): .6}, 4)
+
+
+def _permuted(P, rng):
+    perm = rng.permutation(len(P))
+    inv = np.argsort(perm)
+    return P[np.ix_(perm, perm)], inv      # arm a of P is arm inv[a] of the permuted matrix
+
+
+def _is_int(x):
+    return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
+
+
+def _random_bt(rng, k):
+    u = rng.normal(size=k)
+    return expit(u[:, None] - u[None, :]), int(np.argmax(u))
+
+
+@stub("condorcet_winner", points=1, hint=C_HINT)
+def test_condorcet_exists(student, rng):
+    """Bradley–Terry instances: the arm of highest utility, as an int"""
+    for k in (3, 6, 9):
+        P, best = _random_bt(rng, k)
+        got = student.condorcet_winner(P)
+        assert _is_int(got), f"return an int arm index, got {got!r}"
+        assert got == best, f"on a {k}-arm instance the Condorcet winner is arm {best}, got {got}"
+
+
+@stub("condorcet_winner", points=1, hint=C_HINT)
+def test_condorcet_none(student, rng):
+    """No Condorcet winner: a cycle, the hand-made instance permuted, and an exact tie"""
+    cycle = _from_upper({(0, 1): .7, (1, 2): .7, (0, 2): .3}, 3)
+    P, _ = _permuted(DIFFER, rng)
+    for name, M in (("a 3-cycle", cycle), ("a 5-arm instance", P), ("an instance whose best arm ties one opponent", TIED)):
+        got = student.condorcet_winner(M)
+        assert got is None, f"{name} has no Condorcet winner, got {got!r}"
+
+
+@stub("condorcet_winner", points=1, hint=C_HINT)
+def test_condorcet_random_matches_reference(student, reference, rng):
+    """Random preference matrices (most without a Condorcet winner)"""
+    for _ in range(6):
+        A = rng.random((5, 5))
+        P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(5)
+        want, got = reference.condorcet_winner(P), student.condorcet_winner(P)
+        assert got == want and (got is None) == (want is None), f"expected {want}, got {got!r} for P =\n{P.round(2)}"
+
+
+@stub("copeland_winner", points=2, hint=CO_HINT)
+def test_copeland_hand_made(student, rng):
+    """The instance where the three winners differ (permuted), and one with exact ties"""
+    P, inv = _permuted(DIFFER, rng)
+    got = student.copeland_winner(P)
+    assert _is_int(got) and got == inv[0], f"expected arm {inv[0]} (three wins), got {got!r}"
+    got = student.copeland_winner(COPELAND_TIES)
+    assert got == 1, f"only arm 1 beats two arms (P = 0.5 is not a win); expected 1, got {got!r}"
+
+
+@stub("copeland_winner", points=1, hint=CO_HINT)
+def test_copeland_random_matches_reference(student, reference, rng):
+    """Random matrices, compared with the definition"""
+    for _ in range(6):
+        A = rng.random((6, 6))
+        P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(6)
+        want, got = reference.copeland_winner(P), student.copeland_winner(P)
+        assert got == want, f"expected {want}, got {got!r} for P =\n{P.round(2)}"
+
+
+@stub("borda_winner", points=2, hint=B_HINT)
+def test_borda_hand_made(student, rng):
+    """The instance where the three winners differ (permuted)"""
+    P, inv = _permuted(DIFFER, rng)
+    got = student.borda_winner(P)
+    assert _is_int(got) and got == inv[1], f"expected arm {inv[1]} (mean win rate 0.70), got {got!r}"
+
+
+@stub("borda_winner", points=1, hint=B_HINT)
+def test_borda_random_matches_reference(student, reference, rng):
+    """Random matrices, compared with the definition"""
+    for _ in range(6):
+        A = rng.random((7, 7))
+        P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(7)
+        want, got = reference.borda_winner(P), student.borda_winner(P)
+        assert got == want, f"expected {want}, got {got!r} for P =\n{P.round(2)}"
