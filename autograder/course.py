@@ -4,7 +4,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-REPO = Path(os.environ.get("RLCOURSE_REPO", Path(__file__).resolve().parents[1]))
+INSTALLED = Path(__file__).resolve().parents[1]
+"""The repository this package runs from."""
+REPO = Path(os.environ.get("RLCOURSE_REPO", INSTALLED))
+"""The course being graded: this repository, or another laid out the same way (tests use a small one)."""
 
 
 def assignment_ids() -> list[str]:
@@ -35,6 +38,17 @@ def check_assignment(assignment: str) -> None:
         raise SystemExit(f"unknown or ungradable assignment {assignment!r}; gradable ones: {known}")
 
 
+def limits(assignment: str) -> "Limits":
+    """The sandbox limits of an assignment: defaults, overridden by its suite's ``limits.json``."""
+    import json
+
+    from autograder.sandbox import Limits
+
+    path = suite_dir(assignment) / "limits.json"
+    return Limits(**json.loads(path.read_text())) if path.exists() else Limits()
+
+
 def secret_paths() -> list[Path]:
     """What a sandbox must never read: solutions, suites and samples."""
-    return [REPO / "solutions", REPO / "autograder" / "suites", REPO / "autograder" / "samples"]
+    roots = dict.fromkeys([REPO, INSTALLED])
+    return [root / part for root in roots for part in ("solutions", "autograder/suites", "autograder/samples")]

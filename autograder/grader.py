@@ -172,7 +172,8 @@ class Grader:
 
     def __init__(self, assignment: str, limits: Limits | None = None, hidden: list[Path] = ()) -> None:
         course.check_assignment(assignment)
-        self.assignment, self.limits = assignment, limits or Limits()
+        self.assignment, self.limits = assignment, limits or course.limits(assignment)
+        self.suite = course.suite_dir(assignment)
         release = read_notebook(course.release_notebook(assignment))
         self.plan = release_plan(release)
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
@@ -181,6 +182,7 @@ class Grader:
         self.zygote = Zygote(imported_modules([c.source for c in self.plan if c.kind != "stub"]))
         self.reference_ns = build_reference(assignment)
         self.hidden = _safe_hidden([*course.secret_paths(), *hidden])
+        self.readonly = sorted({str(Path(p).resolve()) for p in (course.REPO, course.INSTALLED, sys.prefix)})
         self.catalogue = self._catalogue()
 
     def _catalogue(self) -> list[TestOutcome]:
@@ -211,7 +213,8 @@ class Grader:
             return self._ungradable(result, f"could not read the notebook: {err}", start)
         stubs, match_notes = find_stubs(nb, self.expected)
         result.notes += notes + match_notes
-        session = Session(self.zygote, self.cells_for(stubs), self.hidden + _safe_hidden(list(hidden)), self.limits)
+        session = Session(self.zygote, self.cells_for(stubs), self.hidden + _safe_hidden(list(hidden)),
+                          self.readonly, self.limits)
         for missing in set(self.expected) - set(stubs):
             session.status[missing] = CellStatus(False, f"no cell defines `{missing}` (was its cell deleted, or the "
                                                           "function renamed?)")
@@ -238,7 +241,7 @@ class Grader:
         return result
 
     def _run_suite(self, plugin: SuitePlugin, *extra: str) -> None:
-        suite = course.suite_dir(self.assignment)
+        suite = self.suite
         args = [str(suite), *extra, "-q", "-p", "no:cacheprovider", "--import-mode=importlib", "-c", os.devnull,
                 "--rootdir", str(suite), "-o", "python_files=test_*.py", "-W", "ignore::DeprecationWarning"]
         log = io.StringIO()

@@ -34,7 +34,8 @@ from autograder.wire import FrameReader, send_message
 
 CLONE_NEWNS, CLONE_NEWUTS, CLONE_NEWIPC = 0x00020000, 0x04000000, 0x08000000
 CLONE_NEWUSER, CLONE_NEWPID, CLONE_NEWNET = 0x10000000, 0x20000000, 0x40000000
-MS_RDONLY, MS_NOSUID, MS_NODEV, MS_NOEXEC, MS_BIND, MS_REC, MS_PRIVATE = 1, 2, 4, 8, 4096, 16384, 1 << 18
+MS_RDONLY, MS_NOSUID, MS_NODEV, MS_NOEXEC, MS_REMOUNT = 1, 2, 4, 8, 32
+MS_BIND, MS_MOVE, MS_REC, MS_PRIVATE = 4096, 8192, 16384, 1 << 18
 PR_SET_DUMPABLE, PR_SET_NO_NEW_PRIVS, PR_SET_PDEATHSIG = 4, 38, 1
 
 
@@ -58,6 +59,7 @@ class SpawnConfig:
     """What the zygote needs to start one worker (sent as JSON)."""
 
     hidden_paths: list[str] = field(default_factory=list)
+    readonly_paths: list[str] = field(default_factory=list)
     limits: Limits = field(default_factory=Limits)
 
 
@@ -92,18 +94,50 @@ def _enter_namespaces() -> str:
     return "user-namespace"
 
 
-def _isolate_filesystem(hidden: list[str], tmp_bytes: int) -> None:
-    """Inside the new mount namespace: private mounts, a fresh /proc, hidden paths, a small /tmp."""
+def _isolate_filesystem(hidden: list[str], readonly: list[str], tmp_bytes: int) -> None:
+    """Inside the new mount namespace: private mounts, a fresh /proc, read-only code, hidden paths, a small /tmp."""
     _mount(None, "/", None, MS_REC | MS_PRIVATE)
     _mount("proc", "/proc", "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC)
+    for path in ("/tmp", "/dev/shm"):
+        if os.path.isdir(path):
+            _mount("tmpfs", path, "tmpfs", MS_NOSUID | MS_NODEV, f"size={tmp_bytes},mode=1777")
+    _expose([*readonly, sys.base_prefix])
+    for path in readonly:  # the course code and the Python environment: student code cannot alter them
+        if os.path.isdir(path):
+            keep = os.statvfs(path).f_flag & (MS_NOSUID | MS_NODEV | MS_NOEXEC)  # flags a user namespace must keep
+            _mount(path, path, None, MS_BIND | MS_REC)
+            _mount(None, path, None, MS_BIND | MS_REMOUNT | MS_RDONLY | keep)
     for path in hidden:
         if os.path.isdir(path):
             _mount("tmpfs", path, "tmpfs", MS_RDONLY | MS_NOSUID | MS_NODEV | MS_NOEXEC, "size=4k,mode=0555")
         elif os.path.exists(path):
             _mount("/dev/null", path, None, MS_BIND)
-    for path in ("/tmp", "/dev/shm"):
-        if os.path.isdir(path):
-            _mount("tmpfs", path, "tmpfs", MS_NOSUID | MS_NODEV, f"size={tmp_bytes},mode=1777")
+
+
+def _expose(targets: list[str]) -> None:
+    """Make ``targets`` reachable by an unprivileged uid when a parent folder is closed to others.
+
+    Python often lives under ``/root`` (mode 700). The closed folder is replaced, in this mount
+    namespace only, by an empty tmpfs holding just the needed subfolder (moved in from a staging
+    bind mount), which also hides everything else in it.
+    """
+    children: dict[str, set[str]] = {}
+    for target in targets:
+        parts = os.path.realpath(target).split(os.sep)[1:]
+        for depth in range(1, len(parts)):
+            folder = os.sep + os.path.join(*parts[:depth])
+            if not os.stat(folder).st_mode & 0o001:
+                children.setdefault(folder, set()).add(parts[depth])
+                break
+    for i, (folder, names) in enumerate(sorted(children.items())):
+        stage = f"/tmp/.expose{i}"
+        for name in names:
+            os.makedirs(f"{stage}/{name}")
+            _mount(os.path.join(folder, name), f"{stage}/{name}", None, MS_BIND | MS_REC)
+        _mount("tmpfs", folder, "tmpfs", MS_NOSUID | MS_NODEV, "size=4k,mode=0755")
+        for name in names:
+            os.makedirs(os.path.join(folder, name))
+            _mount(f"{stage}/{name}", os.path.join(folder, name), None, MS_MOVE)
 
 
 def _set_limits(limits: Limits, count_processes: bool) -> None:
@@ -126,7 +160,7 @@ def _worker_process(config: SpawnConfig, fds: list[int], isolation: str, uid: in
     to_worker, from_worker, output = fds
     try:
         if isolation != "none":
-            _isolate_filesystem(config.hidden_paths, config.limits.tmp_bytes)
+            _isolate_filesystem(config.hidden_paths, config.readonly_paths, config.limits.tmp_bytes)
         uid = uid if isolation == "full" else None
         workdir = "/tmp/work"
         os.makedirs(workdir, exist_ok=True)
@@ -144,6 +178,10 @@ def _worker_process(config: SpawnConfig, fds: list[int], isolation: str, uid: in
                     os.close(fd)
                 except OSError:
                     pass
+        # Whatever the grader's own streams were (pytest replaces them), the student's go to the pipe.
+        sys.stdin = open(0, "r", closefd=False)
+        sys.stdout = open(1, "w", buffering=1, encoding="utf-8", errors="replace", closefd=False)
+        sys.stderr = open(2, "w", buffering=1, encoding="utf-8", errors="replace", closefd=False)
         _set_limits(config.limits, count_processes=uid is not None)
         if uid is not None:
             os.setgroups([])
@@ -209,7 +247,7 @@ def _zygote_main(sock: socket.socket, preload: list[str]) -> None:
         if not message:
             os._exit(0)
         raw = json.loads(message)
-        config = SpawnConfig(hidden_paths=raw["hidden_paths"], limits=Limits(**raw["limits"]))
+        config = SpawnConfig(raw["hidden_paths"], raw["readonly_paths"], Limits(**raw["limits"]))
         if os.fork() == 0:
             sock.close()
             _launch(config, list(fds))
@@ -238,7 +276,7 @@ class Zygote:
         to_r, to_w = os.pipe()
         from_r, from_w = os.pipe()
         out_r, out_w = os.pipe()
-        message = json.dumps({"hidden_paths": config.hidden_paths, "limits": asdict(config.limits)}).encode()
+        message = json.dumps(asdict(config)).encode()
         with self.lock:
             socket.send_fds(self.sock, [message], [to_r, from_w, out_w])
         for fd in (to_r, from_w, out_w):

@@ -1,0 +1,50 @@
+# The course's commands. Every target creates the environment first (a .venv beside this file),
+# so each works on a fresh machine that has only Python 3.11.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup demo test assignments student-release datasets-check gradescope bench site figures clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e .
+	$(PY) -m rlcourse.video
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+## The grading demo: batch-grade every assignment's sample submissions, print the gradebooks.
+demo: setup
+	$(PY) -m autograder demo
+
+## The whole test suite.
+test: setup
+	$(PY) -m pytest -q
+
+## Regenerate every student notebook from solutions/ with nbgrader.
+assignments: setup
+	$(PY) -m autograder assignments
+
+## The student-only tree: make student-release OUT=DIR
+student-release: setup
+	@test -n "$(OUT)" || { echo "usage: make student-release OUT=DIR"; exit 2; }
+	$(PY) -m autograder student-release $(OUT)
+
+## Verify every shipped data file against datasets/MANIFEST.json.
+datasets-check: setup
+	$(PY) -m rlcourse.data check
+
+## The Gradescope bundle: make gradescope ID=hw0_setup
+gradescope: setup
+	@test -n "$(ID)" || { echo "usage: make gradescope ID=<assignment>"; exit 2; }
+	$(PY) -m autograder gradescope $(ID)
+
+## Every benchmark; each prints the table the README shows.
+bench: setup
+	set -e; for script in bench/bench_*.py; do $(PY) $$script; done
+
+clean:
+	rm -rf build .pytest_cache

@@ -1,0 +1,97 @@
+"""The grading model end to end: full marks, zero, exact partial credit, handles, isolation."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from autograder.grader import Grader
+from autograder.report import feedback_markdown, gradescope_results
+from conftest import REPO, with_cells
+
+SOLVED = {
+    "scaled_sum": "def scaled_sum(x):\n    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)",
+    "mean_of": "def mean_of(values):\n    return float(np.mean(values))",
+}
+
+
+@pytest.fixture(scope="module")
+def fx_grader():
+    from autograder import course
+
+    saved = course.REPO
+    course.REPO = REPO / "tests" / "fixtures" / "course"
+    try:
+        grader = Grader("fx")  # the grader keeps its course's paths from here on
+    finally:
+        course.REPO = saved
+    yield grader
+    grader.close()
+
+
+@pytest.fixture(scope="module")
+def hw0_grader():
+    grader = Grader("hw0_setup")
+    yield grader
+    grader.close()
+
+
+def scores(result):
+    return {stub.name: (stub.score, stub.max_score) for stub in result.stubs}
+
+
+def test_reference_solution_scores_full_marks(fx_grader):
+    result = fx_grader.grade(REPO / "tests/fixtures/course/solutions/fx/fx.ipynb")
+    assert result.error is None
+    assert result.score == result.max_score == 6
+    assert result.isolation in ("full", "user-namespace")
+
+
+def test_student_notebook_scores_zero_with_not_implemented(fx_grader):
+    result = fx_grader.grade(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb")
+    assert result.score == 0 and result.max_score == 6
+    for stub in result.stubs:
+        assert all("not implemented" in t.message for t in stub.tests), stub
+
+
+def test_half_done_submission_gets_credit_exactly_on_completed_stubs(fx_grader, tmp_path):
+    nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "half.ipynb",
+                    {"scaled_sum": SOLVED["scaled_sum"]})
+    assert scores(fx_grader.grade(nb)) == {"scaled_sum": (3, 3), "Counter": (0, 2), "mean_of": (0, 1)}
+
+
+def test_objects_come_back_as_handles_whose_methods_run_in_the_sandbox(fx_grader, tmp_path):
+    counter = "class Counter:\n    def __init__(self, start=0):\n        self.value = start\n" \
+              "    def increment(self, by=1):\n        self.value += by\n        return self.value\n"
+    nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "c.ipynb", {"Counter": counter})
+    assert scores(fx_grader.grade(nb))["Counter"] == (2, 2)
+
+
+def test_a_wrong_answer_fails_with_a_message_and_hint(fx_grader, tmp_path):
+    wrong = "def scaled_sum(x):\n    return SCALE * np.asarray(x, dtype=float).sum(axis=0)"
+    nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "w.ipynb", {"scaled_sum": wrong})
+    result = fx_grader.grade(nb)
+    failed = [t for s in result.stubs if s.name == "scaled_sum" for t in s.tests if not t.passed]
+    assert failed and "shape" in failed[0].message and failed[0].hint == "Sum over the last axis, then scale."
+    text = feedback_markdown(result)
+    assert "✗" in text and "hint" in text and "q_why" in text  # the manual cell is listed with its points
+
+
+def test_gradescope_results_have_one_test_per_stub(hw0_grader):
+    result = hw0_grader.grade(REPO / "autograder/samples/hw0_setup/partial.ipynb")
+    data = json.loads(json.dumps(gradescope_results(result)))
+    assert [t["name"] for t in data["tests"]] == ["discounted_returns", "episode_returns"]
+    assert data["score"] == sum(t["score"] for t in data["tests"]) == 5
+    assert {"score", "max_score", "status", "output", "visibility"} <= set(data["tests"][0])
+    assert data["tests"][1]["status"] == "failed" and "not implemented" in data["tests"][1]["output"]
+    assert "execution_time" in data
+
+
+@pytest.mark.parametrize("sample", ["complete", "partial", "untouched", "broken_syntax", "broken_exception",
+                                    "infinite_loop", "cheating"])
+def test_hw0_samples_score_as_expected(hw0_grader, sample):
+    expected = json.loads((REPO / "autograder/samples/hw0_setup/expected.json").read_text())[sample]
+    result = hw0_grader.grade(REPO / f"autograder/samples/hw0_setup/{sample}.ipynb")
+    for stub in result.stubs:
+        want = stub.max_score if expected[stub.name] == "full" else 0
+        assert stub.score == want, (sample, stub.name, [t.message for t in stub.tests])
