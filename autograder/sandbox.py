@@ -63,6 +63,9 @@ class SpawnConfig:
     limits: Limits = field(default_factory=Limits)
 
 
+SAFE_ENV = {"PATH", "LANG", "MUJOCO_GL", "PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+            "OPENBLAS_NUM_THREADS", "OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "VIRTUAL_ENV"}
+
 _libc = ctypes.CDLL(None, use_errno=True)
 
 
@@ -140,7 +143,19 @@ def _expose(targets: list[str]) -> None:
             _mount(f"{stage}/{name}", os.path.join(folder, name), None, MS_MOVE)
 
 
-def _set_limits(limits: Limits, count_processes: bool) -> None:
+def _processes_of(uid: int) -> int:
+    """How many processes (threads included, as RLIMIT_NPROC counts them) ``uid`` runs now."""
+    count = 0
+    for pid in os.listdir("/proc"):
+        try:
+            if pid.isdigit() and os.stat(f"/proc/{pid}").st_uid == uid:
+                count += len(os.listdir(f"/proc/{pid}/task"))
+        except OSError:
+            pass
+    return count
+
+
+def _set_limits(limits: Limits, processes: int) -> None:
     def cap(which: int, value: int) -> None:
         soft, hard = resource.getrlimit(which)
         value = value if hard == resource.RLIM_INFINITY else min(value, hard)
@@ -151,11 +166,10 @@ def _set_limits(limits: Limits, count_processes: bool) -> None:
     cap(resource.RLIMIT_FSIZE, limits.file_bytes)
     cap(resource.RLIMIT_NOFILE, limits.open_files)
     cap(resource.RLIMIT_CORE, 0)
-    if count_processes:
-        cap(resource.RLIMIT_NPROC, limits.processes)
+    cap(resource.RLIMIT_NPROC, processes)
 
 
-def _worker_process(config: SpawnConfig, fds: list[int], isolation: str, uid: int) -> None:
+def _worker_process(config: SpawnConfig, fds: list[int], isolation: str, uid: int, existing: int) -> None:
     """The worker proper (PID 1 of its namespace when isolated); never returns."""
     to_worker, from_worker, output = fds
     try:
@@ -167,7 +181,9 @@ def _worker_process(config: SpawnConfig, fds: list[int], isolation: str, uid: in
         if uid is not None:
             os.chown(workdir, uid, uid)
         os.chdir(workdir)
-        os.environ.update(HOME=workdir, TMPDIR=workdir, MPLCONFIGDIR=workdir, MPLBACKEND="Agg")
+        keep = {k: v for k, v in os.environ.items() if k in SAFE_ENV or k.startswith(("LC_", "PYTHON"))}
+        os.environ.clear()  # nothing of the grader's environment (tokens, paths) reaches student code
+        os.environ.update(keep, HOME=workdir, TMPDIR=workdir, MPLCONFIGDIR=workdir, MPLBACKEND="Agg")
         os.dup2(output, 1)
         os.dup2(output, 2)
         devnull = os.open(os.devnull, os.O_RDONLY)
@@ -182,7 +198,9 @@ def _worker_process(config: SpawnConfig, fds: list[int], isolation: str, uid: in
         sys.stdin = open(0, "r", closefd=False)
         sys.stdout = open(1, "w", buffering=1, encoding="utf-8", errors="replace", closefd=False)
         sys.stderr = open(2, "w", buffering=1, encoding="utf-8", errors="replace", closefd=False)
-        _set_limits(config.limits, count_processes=uid is not None)
+        # RLIMIT_NPROC counts every process of the real uid: a worker's own uid starts at zero,
+        # while a normal user's grader shares its uid with everything else that user runs.
+        _set_limits(config.limits, config.limits.processes + (0 if uid is not None else existing))
         if uid is not None:
             os.setgroups([])
             os.setresgid(uid, uid, uid)
@@ -208,13 +226,14 @@ def _launch(config: SpawnConfig, fds: list[int]) -> None:
     except OSError:
         isolation = "none"
     uid = 20000 + os.getpid() % 40000  # one uid per live worker: workers cannot signal each other
+    existing = _processes_of(os.getuid())  # counted before the worker's /proc shows only its own namespace
     sync_r, sync_w = os.pipe()
     pid = os.fork()
     if pid == 0:
         os.close(sync_w)
         os.read(sync_r, 1)
         os.close(sync_r)
-        _worker_process(config, fds, isolation, uid)
+        _worker_process(config, fds, isolation, uid, existing)
     os.close(sync_r)
     send_message(fds[1], {"ok": True, "pid": pid, "pgid": os.getpgid(0), "isolation": isolation})
     os.write(sync_w, b"go")

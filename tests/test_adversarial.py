@@ -1,0 +1,287 @@
+"""A corpus of submissions that try to cheat or to harm, graded in one batch.
+
+Each case replaces the fixture assignment's `scaled_sum` cell (every other stub
+is left unimplemented, so an honest empty submission scores 0). Several return
+the right answer only if their trick worked (reading the suites, reaching the
+network, finding a secret in the environment), so a score above zero means the
+sandbox let the trick through. Every case must score 0, and the batch must
+finish with every case in the gradebook. The corpus runs as root and, through
+a user switch, as a normal user.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from autograder.batch import run_batch
+from conftest import FIXTURE_COURSE, REPO, with_cells
+
+RIGHT = "SCALE * np.asarray(x, dtype=float).sum(axis=-1)"
+
+CASES = {
+    "always_equal": """
+        class Anything(float):
+            shape = (4,)
+            def __eq__(self, other): return True
+            def __ne__(self, other): return False
+            __hash__ = float.__hash__
+        def scaled_sum(x):
+            return Anything(0.0)
+        """,
+    "ndarray_subclass": """
+        class Yes(np.ndarray):
+            def __eq__(self, other): return np.ones(np.shape(other), bool)
+        def scaled_sum(x):
+            return np.zeros(np.shape(x)[:-1]).view(Yes)
+        """,
+    "nan_answers": """
+        def scaled_sum(x):
+            return np.full(np.shape(x)[:-1], np.nan)
+        """,
+    "monkeypatch_numpy_pytest_builtins": """
+        import builtins, numpy, pytest
+        numpy.allclose = numpy.isclose = lambda *a, **k: True
+        numpy.testing.assert_allclose = lambda *a, **k: None
+        pytest.approx = lambda *a, **k: True
+        builtins.isinstance = lambda *a: True
+        builtins.type = lambda *a: np.ndarray
+        import autograder.suite, autograder.wire
+        autograder.suite.check_array = lambda *a, **k: None
+        def scaled_sum(x):
+            return 0
+        """,
+    "read_suites_and_solutions": """
+        import glob, os
+        FOUND = glob.glob("/**/suites/fx/*.py", recursive=False) + glob.glob(os.environ.get("HOME", "/") + "/../**")
+        for path in [SUITE, SOLUTION]:
+            try:
+                FOUND.append(open(path).read())
+            except OSError:
+                pass
+        def scaled_sum(x):
+            return {RIGHT} if any("scaled_sum" in f for f in FOUND) else None
+        """,
+    "import_the_suite_or_reference": """
+        import sys
+        sys.path[:0] = ["{course}/autograder/suites/fx", "{course}/solutions/fx"]
+        try:
+            import test_fx
+            OK = True
+        except ImportError:
+            OK = False
+        def scaled_sum(x):
+            return {RIGHT} if OK else None
+        """,
+    "secret_in_environment": """
+        import os
+        def scaled_sum(x):
+            return {RIGHT} if "RLCOURSE_TEST_SECRET" in os.environ else None
+        """,
+    "network": """
+        import socket
+        def scaled_sum(x):
+            try:
+                socket.create_connection(("127.0.0.1", PORT), timeout=1).close()
+                return {RIGHT}
+            except OSError:
+                return None
+        """,
+    "write_results_and_fake_scores": """
+        import json, os
+        for folder in [OUT, "/autograder/results", os.getcwd()]:
+            try:
+                with open(os.path.join(folder, "results.json"), "w") as f:
+                    json.dump({"score": 100, "tests": []}, f)
+            except OSError:
+                pass
+        print(json.dumps({"score": 100, "tests": [{"name": "scaled_sum", "score": 3, "max_score": 3}]}))
+        def scaled_sum(x):
+            print("PASSED 3/3")
+            return None
+        """,
+    "alter_course_code_on_disk": """
+        import os, sysconfig
+        for path in [os.path.join(COURSE_CODE, "rlcourse", "__init__.py"), os.path.join(COURSE_CODE, "autograder", "suite.py"),
+                     os.path.join(sysconfig.get_paths()["purelib"], "sitecustomize.py")]:
+            try:
+                with open(path, "a") as f:
+                    f.write("\\nraise SystemExit('tampered')\\n")
+            except OSError:
+                pass
+        def scaled_sum(x):
+            return None
+        """,
+    "exit_and_kill": """
+        import os, signal, sys
+        def scaled_sum(x):
+            for target in (os.getppid(), -1, 1):
+                try:
+                    os.kill(target, signal.SIGKILL)
+                except OSError:
+                    pass
+            sys.exit(0)
+        """,
+    "os_exit_at_import": """
+        import os
+        os._exit(0)
+        """,
+    "sys_exit_in_call": """
+        import sys
+        def scaled_sum(x):
+            sys.exit("done")
+        """,
+    "infinite_loop_in_call": """
+        def scaled_sum(x):
+            while True:
+                pass
+        """,
+    "infinite_loop_at_import": """
+        while True:
+            pass
+        """,
+    "sleep_past_limits": """
+        import time
+        def scaled_sum(x):
+            time.sleep(1000)
+        """,
+    "fork_bomb": """
+        import os
+        def scaled_sum(x):
+            while True:
+                try:
+                    os.fork()
+                except OSError:
+                    pass
+        """,
+    "memory_bomb": """
+        def scaled_sum(x):
+            hog = []
+            while True:
+                hog.append(bytearray(50 * 1024 * 1024))
+        """,
+    "fill_the_disk": """
+        import os
+        def scaled_sum(x):
+            with open("filler", "wb") as f:
+                for _ in range(4096):
+                    f.write(os.urandom(1024 * 1024))
+        """,
+    "garbage_on_the_channel": """
+        import os
+        def scaled_sum(x):
+            for fd in map(int, os.listdir("/proc/self/fd")):
+                try:
+                    os.write(fd, b"\\xff" * 64)
+                except OSError:
+                    pass
+            return None
+        """,
+    "huge_return_value": """
+        def scaled_sum(x):
+            return np.zeros(40_000_000)
+        """,
+    "output_flood": """
+        import sys
+        def scaled_sum(x):
+            for _ in range(20000):
+                sys.stdout.write("x" * 4096)
+            return None
+        """,
+    "recursion_and_deep_nesting": """
+        def scaled_sum(x):
+            value = []
+            for _ in range(10000):
+                value = [value]
+            return value
+        """,
+}
+
+
+def _case_source(code: str, port: int, out: str) -> str:
+    header = (f"SUITE = {str(FIXTURE_COURSE / 'autograder/suites/fx/test_fx.py')!r}\n"
+              f"SOLUTION = {str(FIXTURE_COURSE / 'solutions/fx/fx.ipynb')!r}\nPORT = {port}\nOUT = {out!r}\n"
+              f"COURSE_CODE = {str(REPO)!r}\n")
+    body = textwrap.dedent(code).replace("{RIGHT}", RIGHT).replace("{course}", str(FIXTURE_COURSE))
+    return header + body
+
+
+@pytest.fixture
+def corpus(open_tmp):
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    port = server.getsockname()[1]
+    folder = open_tmp / "submissions"
+    for name, code in CASES.items():
+        with_cells(FIXTURE_COURSE / "assignments/fx/fx.ipynb", folder / f"{name}.ipynb",
+                   {"scaled_sum": _case_source(code, port, str(open_tmp / "out"))})
+    yield folder, open_tmp / "out"
+    server.close()
+
+
+def _code_digest() -> dict[str, bytes | None]:
+    """The files the tampering case writes to (a sitecustomize.py must not appear at all)."""
+    import sysconfig
+
+    paths = [REPO / "rlcourse/__init__.py", REPO / "autograder/suite.py",
+             os.path.join(sysconfig.get_paths()["purelib"], "sitecustomize.py")]
+    return {str(p): open(p, "rb").read() if os.path.exists(p) else None for p in paths}
+
+
+def _check_gradebook(out):
+    rows = list(csv.DictReader((out / "gradebook.csv").open()))
+    assert sorted(r["submission"] for r in rows) == sorted(CASES), "every case is in the gradebook"
+    over = {r["submission"]: r["score"] for r in rows if float(r["score"]) > 0}
+    assert not over, f"cheating cases scored above an honest empty submission: {over}"
+    for name in CASES:  # the results are the grader's, not the student's forgeries
+        data = json.loads((out / name / "results.json").read_text())
+        assert data["score"] == 0 and len(data["tests"]) == 3
+
+
+def test_corpus_scores_nothing_as_root(corpus, monkeypatch):
+    if os.geteuid() != 0:
+        pytest.skip("needs root")
+    folder, out = corpus
+    monkeypatch.setenv("RLCOURSE_TEST_SECRET", "do-not-leak")
+    monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
+    from autograder import course
+
+    monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
+    before = _code_digest()
+    results = run_batch("fx", folder, out, jobs=2, progress=False)
+    assert len(results) == len(CASES)
+    _check_gradebook(out)
+    assert _code_digest() == before, "course code on disk was modified"
+    assert {r.isolation for r in results if r.isolation != "unknown"} == {"full"}
+
+
+def test_corpus_scores_nothing_as_a_normal_user(corpus):
+    """The same corpus with the grader itself running as `nobody` (user namespaces instead of root)."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root to switch to an unprivileged user")
+    folder, out = corpus
+    python_root = os.path.realpath(sys.base_prefix)
+    # /root is closed to other users: expose the Python installation to `nobody`, as a real user's machine would.
+    script = (f"mkdir -p /tmp/.stage && mount --bind {python_root} /tmp/.stage && "
+              f"mount -t tmpfs -o mode=755 tmpfs /root && mkdir -p {python_root} && "
+              f"mount --move /tmp/.stage {python_root} && "
+              f"exec setpriv --reuid=65534 --regid=65534 --clear-groups env HOME={out.parent} "
+              f"RLCOURSE_REPO={FIXTURE_COURSE} RLCOURSE_TEST_SECRET=do-not-leak "
+              f"{sys.executable} -m autograder batch fx {folder} --out {out} --jobs 2")
+    if not python_root.startswith("/root/"):
+        script = (f"exec setpriv --reuid=65534 --regid=65534 --clear-groups env HOME={out.parent} "
+                  f"RLCOURSE_REPO={FIXTURE_COURSE} RLCOURSE_TEST_SECRET=do-not-leak "
+                  f"{sys.executable} -m autograder batch fx {folder} --out {out} --jobs 2")
+    done = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script],
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    _check_gradebook(out)
+    isolation = {json.loads((out / n / "result.json").read_text())["isolation"] for n in CASES}
+    assert isolation - {"unknown"} == {"user-namespace"}

@@ -1,0 +1,111 @@
+"""Damaged and odd submissions: a clear message and the best honest score, never a traceback."""
+from __future__ import annotations
+
+import json
+
+import nbformat
+import pytest
+
+from autograder.grader import Grader
+from conftest import FIXTURE_COURSE, with_cells
+
+SOLUTION = FIXTURE_COURSE / "solutions/fx/fx.ipynb"
+RELEASE = FIXTURE_COURSE / "assignments/fx/fx.ipynb"
+
+
+@pytest.fixture(scope="module")
+def grader():
+    from autograder import course
+
+    saved, course.REPO = course.REPO, FIXTURE_COURSE
+    try:
+        g = Grader("fx")
+    finally:
+        course.REPO = saved
+    yield g
+    g.close()
+
+
+def solved_copy(tmp_path, name="solved.ipynb"):
+    """The student notebook with every stub done (solution text, no markers)."""
+    sol = nbformat.read(str(SOLUTION), as_version=4)
+    code = {c.metadata["nbgrader"]["grade_id"]: "\n".join(l for l in c.source.splitlines() if "SOLUTION" not in l)
+            for c in sol.cells if c.cell_type == "code" and c.metadata.get("nbgrader", {}).get("solution")}
+    return with_cells(RELEASE, tmp_path / name, code)
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"", "empty"),
+    (b"this is not json", "not valid JSON"),
+    (b'{"cells": [], "nbformat": 4, "nbformat_minor": 5, "metadata": {}}', "no cells"),
+    (b'{"cells": [], "nbformat": 2, "metadata": {}}', "format version"),
+    (b'[1, 2, 3]', "not a Jupyter notebook"),
+    (b'{"cells": 5, "nbformat": 4, "nbformat_minor": 5, "metadata": {}}', "damaged"),
+])
+def test_unreadable_files_are_ungradable_with_a_reason(grader, tmp_path, content, message):
+    path = tmp_path / "bad.ipynb"
+    path.write_bytes(content)
+    result = grader.grade(path)
+    assert result.error and message in result.error
+    assert result.score == 0 and result.max_score == 6  # every test is listed, at zero
+
+
+def test_a_huge_notebook_is_refused_before_parsing(grader, tmp_path):
+    path = tmp_path / "huge.ipynb"
+    with path.open("w") as f:
+        f.write('{"cells": [{"cell_type": "markdown", "metadata": {}, "source": "')
+        for _ in range(200):
+            f.write("x" * 1024 * 1024)
+        f.write('"}], "nbformat": 4, "nbformat_minor": 5, "metadata": {}}')
+    result = grader.grade(path)
+    assert "MB" in result.error and "limit" in result.error
+
+
+def test_stripped_metadata_and_reordered_cells_still_grade_fully(grader, tmp_path):
+    nb = nbformat.read(str(solved_copy(tmp_path)), as_version=4)
+    for cell in nb.cells:
+        cell.metadata = {}
+    nb.cells.reverse()
+    path = tmp_path / "stripped.ipynb"
+    nbformat.write(nb, str(path))
+    result = grader.grade(path)
+    assert result.score == 6
+    assert any("found by the name" in note for note in result.notes)
+
+
+def test_renamed_grade_ids_fall_back_to_the_defined_name(grader, tmp_path):
+    nb = nbformat.read(str(solved_copy(tmp_path)), as_version=4)
+    for cell in nb.cells:
+        if "nbgrader" in cell.metadata:
+            cell.metadata["nbgrader"]["grade_id"] = "cell-" + str(id(cell))
+    path = tmp_path / "renamed.ipynb"
+    nbformat.write(nb, str(path))
+    assert grader.grade(path).score == 6
+
+
+def test_deleted_cells_cost_only_their_stub(grader, tmp_path):
+    path = with_cells(solved_copy(tmp_path), tmp_path / "deleted.ipynb", {"Counter": None})
+    result = grader.grade(path)
+    by_stub = {s.name: s for s in result.stubs}
+    assert result.score == 4 and by_stub["Counter"].score == 0
+    assert "no cell defines `Counter`" in by_stub["Counter"].tests[0].message
+
+
+def test_non_utf8_is_read_with_a_note(grader, tmp_path):
+    path = solved_copy(tmp_path)
+    raw = json.loads(path.read_text())
+    raw["cells"][0]["source"] = "# café"
+    path.write_bytes(json.dumps(raw, ensure_ascii=False).encode("latin-1"))
+    result = grader.grade(path)
+    assert result.score == 6 and any("UTF-8" in note for note in result.notes)
+
+
+def test_old_format_3_notebooks_are_converted(grader, tmp_path):
+    nb3 = {"nbformat": 3, "nbformat_minor": 0, "metadata": {}, "worksheets": [{"cells": [
+        {"cell_type": "code", "input": "def mean_of(values):\n    return float(sum(values) / len(values))",
+         "language": "python", "outputs": [], "metadata": {}}]}]}
+    path = tmp_path / "v3.ipynb"
+    path.write_text(json.dumps(nb3))
+    result = grader.grade(path)
+    assert {s.name: s.score for s in result.stubs}["mean_of"] == 1
+    assert any("format 3" in note for note in result.notes)
