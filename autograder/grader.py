@@ -259,13 +259,15 @@ class Grader:
             by_stub.setdefault(outcome.stub, StubResult(outcome.stub)).tests.append(outcome)
         return list(by_stub.values())
 
-    def _ungradable(self, result: GradeResult, reason: str, start: float) -> GradeResult:
-        """A result with every stub at zero and the reason, so batch grading still lists the submission."""
-        result.error = reason
+    def ungradable(self, name: str, reason: str, notes: list[str] = ()) -> GradeResult:
+        """A result with every hidden test failed for ``reason``: the submission stays in the gradebook."""
         failed = [TestOutcome(t.name, t.stub, t.points, False, reason, t.hint) for t in self.catalogue]
-        result.stubs = self._collect(failed)
-        result.seconds = time.monotonic() - start
-        return result
+        return GradeResult(self.assignment, name, self._collect(failed), list(self.manual), list(notes), reason)
+
+    def _ungradable(self, result: GradeResult, reason: str, start: float) -> GradeResult:
+        out = self.ungradable(result.submission, reason, result.notes)
+        out.seconds = time.monotonic() - start
+        return out
 
     def close(self) -> None:
         self.zygote.close()

@@ -101,9 +101,7 @@ def _isolate_filesystem(hidden: list[str], readonly: list[str], tmp_bytes: int) 
     """Inside the new mount namespace: private mounts, a fresh /proc, read-only code, hidden paths, a small /tmp."""
     _mount(None, "/", None, MS_REC | MS_PRIVATE)
     _mount("proc", "/proc", "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC)
-    for path in ("/tmp", "/dev/shm"):
-        if os.path.isdir(path):
-            _mount("tmpfs", path, "tmpfs", MS_NOSUID | MS_NODEV, f"size={tmp_bytes},mode=1777")
+    _private_tmp(tmp_bytes, keep=readonly)
     _expose([*readonly, sys.base_prefix])
     for path in readonly:  # the course code and the Python environment: student code cannot alter them
         if os.path.isdir(path):
@@ -115,6 +113,25 @@ def _isolate_filesystem(hidden: list[str], readonly: list[str], tmp_bytes: int) 
             _mount("tmpfs", path, "tmpfs", MS_RDONLY | MS_NOSUID | MS_NODEV | MS_NOEXEC, "size=4k,mode=0555")
         elif os.path.exists(path):
             _mount("/dev/null", path, None, MS_BIND)
+
+
+def _private_tmp(size: int, keep: list[str]) -> None:
+    """Fresh, size-limited tmpfs on ``/dev/shm`` and ``/tmp``, keeping the ``keep`` paths that lie in ``/tmp``.
+
+    A course checked out under ``/tmp`` must stay visible: such paths are bind-mounted aside (into
+    the new ``/dev/shm``), ``/tmp`` is covered, and the mounts are moved back to where they were.
+    """
+    options = f"size={size},mode=1777"
+    _mount("tmpfs", "/dev/shm", "tmpfs", MS_NOSUID | MS_NODEV, options)
+    inside = [p for p in map(os.path.realpath, keep) if p.startswith("/tmp/") and os.path.isdir(p)]
+    for i, path in enumerate(inside):
+        os.makedirs(f"/dev/shm/.keep{i}")
+        _mount(path, f"/dev/shm/.keep{i}", None, MS_BIND | MS_REC)
+    _mount("tmpfs", "/tmp", "tmpfs", MS_NOSUID | MS_NODEV, options)
+    for i, path in enumerate(inside):
+        os.makedirs(path, exist_ok=True)
+        _mount(f"/dev/shm/.keep{i}", path, None, MS_MOVE)
+        os.rmdir(f"/dev/shm/.keep{i}")
 
 
 def _expose(targets: list[str]) -> None:

@@ -1,0 +1,108 @@
+"""The Gradescope autograder bundle: build it here, run it there.
+
+Gradescope unzips the bundle into ``/autograder/source``, runs ``setup.sh`` once
+to build the image, then, for each submission, ``run_autograder``, which grades
+``/autograder/submission/*.ipynb`` into ``/autograder/results/results.json``.
+The bundle holds the course library, the grader, this assignment's hidden
+suite, solution and student notebook, and the datasets; setup installs the same
+pins as this repository.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+from autograder import course
+
+SETUP_SH = """\
+#!/usr/bin/env bash
+# Gradescope image set-up (Ubuntu base): Python 3.11, EGL for headless MuJoCo, the course's pins.
+set -euo pipefail
+cd /autograder/source
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq software-properties-common
+add-apt-repository -y ppa:deadsnakes/ppa >/dev/null 2>&1 || true
+apt-get update -qq
+apt-get install -y -qq python3.11 python3.11-venv libegl1 libegl-mesa0 libgl1-mesa-dri libgles2
+python3.11 -m venv .venv
+.venv/bin/python -m pip install --quiet --upgrade pip
+.venv/bin/python -m pip install --quiet -e .
+"""
+
+RUN_AUTOGRADER = """\
+#!/usr/bin/env bash
+# Grade the submission of one student into /autograder/results/results.json.
+cd "${{GRADESCOPE_ROOT:-/autograder}}/source"
+export PYTHONPATH="$PWD" RLCOURSE_REPO="$PWD"
+exec .venv/bin/python -m autograder.gradescope {assignment}
+"""
+
+
+def build_bundle(assignment: str, out: Path | None = None) -> Path:
+    """Write ``build/gradescope/<id>.zip`` (or ``out``) for ``assignment``."""
+    course.check_assignment(assignment)
+    out = Path(out or course.REPO / "build" / "gradescope" / f"{assignment}.zip")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    repo = course.REPO
+    members: list[tuple[Path, str]] = []
+
+    def add_tree(folder: Path, prefix: str) -> None:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file() and "__pycache__" not in path.parts and not path.name.endswith((".pyc", ".tmp")):
+                members.append((path, f"{prefix}/{path.relative_to(folder).as_posix()}"))
+
+    for name in ("pyproject.toml", "README.md"):
+        members.append((repo / name, name))
+    add_tree(repo / "rlcourse", "rlcourse")
+    for path in sorted((repo / "autograder").glob("*.py")):
+        members.append((path, f"autograder/{path.name}"))
+    add_tree(course.suite_dir(assignment), f"autograder/suites/{assignment}")
+    add_tree(course.solution_notebook(assignment).parent, f"solutions/{assignment}")
+    add_tree(course.release_notebook(assignment).parent, f"assignments/{assignment}")
+    if (repo / "datasets").is_dir():
+        add_tree(repo / "datasets", "datasets")
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as bundle:
+        for path, name in members:
+            bundle.write(path, name)
+        for name, text in (("setup.sh", SETUP_SH), ("run_autograder", RUN_AUTOGRADER.format(assignment=assignment))):
+            info = zipfile.ZipInfo(name)
+            info.external_attr = 0o755 << 16
+            bundle.writestr(info, text)
+    return out
+
+
+def run(assignment: str, root: Path) -> int:
+    """Grade the one submission under ``root/submission`` into ``root/results/results.json``."""
+    from autograder.batch import _choose
+    from autograder.grader import Grader
+    from autograder.notebook import read_notebook, release_plan
+    from autograder.report import gradescope_results
+
+    results = root / "results" / "results.json"
+    results.parent.mkdir(parents=True, exist_ok=True)
+    expected = [c.label for c in release_plan(read_notebook(course.release_notebook(assignment))) if c.kind == "stub"]
+    entry = _choose("submission", sorted((root / "submission").rglob("*.ipynb")), assignment, expected)
+    grader = Grader(assignment, hidden=[root / "submission", root / "results"])
+    try:
+        if entry.notebook is None:
+            result = grader.ungradable("submission", entry.problem)
+        else:
+            result = grader.grade(entry.notebook, name=entry.notebook.name)
+            if entry.note:
+                result.notes.insert(0, entry.note)
+    finally:
+        grader.close()
+    tmp = results.with_suffix(".tmp")
+    tmp.write_text(json.dumps(gradescope_results(result), indent=2, ensure_ascii=False))
+    os.replace(tmp, results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(sys.argv[1], Path(os.environ.get("GRADESCOPE_ROOT", "/autograder"))))

@@ -1,0 +1,45 @@
+"""Hidden tests of deep_maxent_irl (its quality is judged against the reference's on the same data)."""
+import numpy as np
+
+from autograder.suite import stub
+from rlcourse.gridworld import object_grid
+
+HINT = ("Per iteration: reward = net(features); soft policy and visitation for it; grad_r = D_expert - D_model "
+        "(mean visit counts per trajectory); loss = -(grad_r * reward).sum(), Adam step. Return (reward (S,), history).")
+_CACHE = {}
+
+
+def _world():
+    if "world" not in _CACHE:
+        world = object_grid(size=8, horizon=14, n_objects=8, seed=2)
+        _CACHE["world"] = world, world.sample_expert(300, np.random.default_rng(0))
+    return _CACHE["world"]
+
+
+def _ratio(reference, world, reward):
+    policy = reference.soft_value_iteration(world.P, np.asarray(reward, dtype=float), world.horizon)
+    return world.expected_return(policy) - world.expected_return(world.expert_policy())
+
+
+@stub("deep_maxent_irl", points=1, hint=HINT)
+def test_shapes_and_history(student):
+    """reward of shape (S,), one history entry per iteration"""
+    world, demos = _world()
+    reward, hist = student.deep_maxent_irl(world.P, world.features, world.p0, demos.states, world.horizon,
+                                           demos.actions, n_iters=5)
+    assert isinstance(reward, np.ndarray) and reward.shape == (world.n_states,), \
+        f"the reward should be a numpy array of shape (S,) = ({world.n_states},), got {type(reward).__name__} {np.shape(reward)}"
+    assert len(hist["grad_norm"]) == 5 and len(hist["log_likelihood"]) == 5, "record one value per iteration"
+
+
+@stub("deep_maxent_irl", points=2, hint=HINT)
+def test_learns_as_well_as_reference(student, reference):
+    """After 150 iterations the learned reward's soft policy earns about what the reference's does"""
+    world, demos = _world()
+    args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+    got, hist = student.deep_maxent_irl(*args, n_iters=150)
+    want, _ = reference.deep_maxent_irl(*args, n_iters=150)
+    gap_got, gap_want = _ratio(reference, world, got), _ratio(reference, world, want)
+    assert gap_got >= gap_want - 0.15 * world.horizon, (
+        f"the learned reward's policy earns {gap_got:.2f} relative to the expert, the reference's {gap_want:.2f}")
+    assert np.asarray(hist["grad_norm"])[-10:].mean() < np.asarray(hist["grad_norm"])[0], "the visitation gap should shrink"

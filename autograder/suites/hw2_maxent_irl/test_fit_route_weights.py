@@ -1,0 +1,62 @@
+"""Hidden tests of fit_route_weights."""
+import numpy as np
+
+from autograder.suite import stub
+from rlcourse.roads import load_network, load_routes
+
+HINT = ("mu_D = mean route features; maximise w . mu_D - mean(route_log_partition(w, ...)) from w = 0 with "
+        "torch.optim.LBFGS(line_search_fn='strong_wolfe'); return (w as a numpy array, history).")
+NET = "RoadNetwork(xy=xy, tail=tail, head=head, road_class=road_class, toll=toll)"
+_CACHE = {}
+
+
+def _data(rng_seed=0, n=60):
+    if n not in _CACHE:
+        net, trips = load_network(), load_routes()
+        idx = np.random.default_rng(rng_seed).choice(np.flatnonzero(~trips.test), size=n, replace=False)
+        feats = np.stack([net.route_features(trips.routes[i]) for i in idx])
+        _CACHE[n] = net, feats, trips.origins[idx], trips.destinations[idx]
+    return _CACHE[n]
+
+
+def _arrays(net):
+    return dict(xy=net.xy, tail=net.tail, head=net.head, road_class=net.road_class, toll=net.toll)
+
+
+def _loglik_and_gradient(reference, net, w, feats, origins, destinations, horizon):
+    """The mean log-likelihood at w and the model's expected features there (reference, trusted side)."""
+    expr = (f"[(lz := route_log_partition((wt := torch.tensor(w, requires_grad=True)), {NET}, origins, "
+            "destinations, horizon).mean()).item(), torch.autograd.grad(lz, wt)[0].numpy()]")
+    mean_log_z, expected = reference.eval(expr, w=np.asarray(w, dtype=float), origins=origins,
+                                          destinations=destinations, horizon=horizon, **_arrays(net))
+    return float(feats.mean(axis=0) @ w - mean_log_z), np.asarray(expected)
+
+
+def _call(client, net, feats, origins, destinations, horizon):
+    return client.eval(f"fit_route_weights({NET}, feats, origins, destinations, horizon, n_iters=60)",
+                       feats=feats, origins=origins, destinations=destinations, horizon=horizon, **_arrays(net))
+
+
+@stub("fit_route_weights", points=2, hint=HINT)
+def test_reaches_the_maximum_likelihood(student, reference):
+    """Its weights reach the reference's log-likelihood (within 1e-3) and match expected features"""
+    net, feats, origins, destinations = _data()
+    w, hist = _call(student, net, feats, origins, destinations, 45)
+    w = np.asarray(w, dtype=float)
+    assert w.shape == (7,), f"the weights should have shape (F,) = (7,), got {w.shape}"
+    w_ref, _ = _call(reference, net, feats, origins, destinations, 45)
+    got, expected = _loglik_and_gradient(reference, net, w, feats, origins, destinations, 45)
+    want, _ = _loglik_and_gradient(reference, net, np.asarray(w_ref), feats, origins, destinations, 45)
+    assert got >= want - 1e-3, f"mean log-likelihood {got:.4f} at your weights, {want:.4f} at the reference's"
+    gap = np.abs(feats.mean(axis=0) - expected).max()
+    assert gap < 2e-2, f"expected route features differ from the data's by {gap:.3f} at your weights"
+
+
+@stub("fit_route_weights", points=1, hint=HINT)
+def test_history_rises(student):
+    """The recorded log-likelihood starts at w = 0 and ends higher"""
+    net, feats, origins, destinations = _data(n=20)
+    _, hist = _call(student, net, feats, origins, destinations, 30)
+    hist = np.asarray(hist, dtype=float)
+    assert hist.ndim == 1 and hist.size >= 2, f"the history should be a 1-D array of log-likelihoods, got shape {hist.shape}"
+    assert hist[-1] > hist[0], f"the log-likelihood went from {hist[0]:.3f} to {hist[-1]:.3f}"

@@ -1,0 +1,72 @@
+"""Hidden tests of maxent_irl (judged with the reference's passes, on the trusted side)."""
+import dataclasses
+
+import numpy as np
+
+from autograder.suite import check_array, stub
+from rlcourse.gridworld import random_mdp, sample_trajectories
+
+HINT = ("Start at w = 0; gradient mu_D - phi^T D(w) with D from your backward and forward passes; the adaptive "
+        "step of the docstring; stop when |g| <= tol |mu_D|. Return (w, {'grad_norm': ..., 'log_likelihood': ...}).")
+
+
+def _problem(reference, seed, n_demos, n_states=20, horizon=10):
+    m = random_mdp(n_states, 4, 3, horizon, seed=seed)
+    expert = reference.soft_value_iteration(m.P, m.true_reward, m.horizon)
+    demos = sample_trajectories(m.P, expert, m.p0, n_demos, np.random.default_rng(seed))
+    return m, expert, demos
+
+
+def _model_features(reference, m, w):
+    policy = reference.soft_value_iteration(m.P, m.features @ np.asarray(w), m.horizon)
+    return m.features.T @ reference.state_visitation_frequency(m.P, policy, m.p0, m.horizon), policy
+
+
+@stub("maxent_irl", points=3, hint=HINT)
+def test_feature_expectations_match(student, reference):
+    """At the learned weights the model's feature expectations match the demonstrations' within 1e-3 (relative)"""
+    for seed in (1, 2):
+        m, _, demos = _problem(reference, seed, 300)
+        w, _ = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions,
+                                  n_iters=2000, tol=1e-5)
+        assert np.shape(w) == (3,), f"the weights should have shape (F,) = (3,), got {np.shape(w)}"
+        mu_d = reference.feature_expectations(demos.states, m.features)
+        gap = np.linalg.norm(mu_d - _model_features(reference, m, w)[0]) / np.linalg.norm(mu_d)
+        assert gap < 1e-3, f"relative feature-expectation gap {gap:.2e} at the learned weights (MDP seed {seed})"
+
+
+@stub("maxent_irl", points=2, hint=HINT)
+def test_return_of_learned_policy(student, reference):
+    """The soft policy of the learned reward earns at least 98% of the expert's expected true return"""
+    m, expert, demos = _problem(reference, 3, 4000)
+    m = dataclasses.replace(m, true_reward=m.true_reward - m.true_reward.min())  # positive returns
+    w, _ = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions, n_iters=2000, tol=1e-5)
+    learned = m.expected_return(_model_features(reference, m, w)[1])
+    target = m.expected_return(expert)
+    assert learned >= 0.98 * target, f"learned policy earns {learned:.3f}, expert {target:.3f} (ratio {learned / target:.3f})"
+
+
+@stub("maxent_irl", points=1, hint=HINT)
+def test_history_starts_at_zero_weights(student, reference):
+    """history['grad_norm'][0] and history['log_likelihood'][0] are those of w = 0"""
+    m, _, demos = _problem(reference, 4, 50)
+    _, hist = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions, n_iters=3)
+    assert isinstance(hist, dict) and {"grad_norm", "log_likelihood"} <= set(hist), \
+        f"the history should be a dict with keys 'grad_norm' and 'log_likelihood', got {type(hist).__name__}"
+    mu_d = reference.feature_expectations(demos.states, m.features)
+    g0 = np.linalg.norm(mu_d - _model_features(reference, m, np.zeros(3))[0])
+    check_array(np.asarray(hist["grad_norm"][:1], dtype=float), np.array([g0]), rtol=1e-6,
+                name="the first gradient norm (at w = 0)")
+    check_array(np.asarray(hist["log_likelihood"][:1], dtype=float), np.array([-m.horizon * np.log(4)]), rtol=1e-6,
+                name="the first log-likelihood (uniform policy: -T log A)")
+
+
+@stub("maxent_irl", points=1, hint=HINT)
+def test_log_likelihood_rises(student, reference):
+    """The recorded log-likelihood ends higher than it starts, and grad_norm ends below tol"""
+    m, _, demos = _problem(reference, 5, 400)
+    _, hist = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions, n_iters=2000, tol=1e-4)
+    ll, gn = np.asarray(hist["log_likelihood"]), np.asarray(hist["grad_norm"])
+    assert ll[-1] > ll[0] + 1.0, f"log-likelihood went from {ll[0]:.3f} to {ll[-1]:.3f}"
+    mu_d = reference.feature_expectations(demos.states, m.features)
+    assert gn[-1] <= 1e-4 * np.linalg.norm(mu_d) * 1.0001, f"stopped with |g| = {gn[-1]:.2e} above tol |mu_D|"

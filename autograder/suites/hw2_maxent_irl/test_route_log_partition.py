@@ -1,0 +1,69 @@
+"""Hidden tests of route_log_partition (brute-force enumeration and the reference)."""
+import numpy as np
+import torch
+from scipy.special import logsumexp
+
+from autograder.suite import check_tensor, stub
+from rlcourse.roads import enumerate_routes, grid_network, load_network, load_routes
+
+HINT = ("Values of shape (D, E) for the distinct destinations: 0 on edges arriving at d, else logsumexp over "
+        "net.successors of (transition reward + value of the next edge), horizon - 1 times; then logsumexp over "
+        "net.out_edges[o] of (edge reward + value). Mask the -1 padding, and keep everything in torch.")
+CALL = ("route_log_partition(torch.tensor(w), RoadNetwork(xy=xy, tail=tail, head=head, road_class=road_class, "
+        "toll=toll), origins, destinations, horizon)")
+
+
+def _arrays(net):
+    return dict(xy=net.xy, tail=net.tail, head=net.head, road_class=net.road_class, toll=net.toll)
+
+
+def _brute(net, w, origin, destination, horizon):
+    return logsumexp([net.route_features(r) @ w for r in enumerate_routes(net, origin, destination, horizon)])
+
+
+@stub("route_log_partition", points=2, hint=HINT)
+def test_matches_brute_force(student, rng):
+    """On a 2 x 3 and a 3 x 3 grid, several origin-destination pairs at once, horizons 5 and 7"""
+    for rows, cols, horizon in ((2, 3, 7), (3, 3, 5)):
+        net = grid_network(rows, cols, seed=rows)
+        w = -rng.uniform(0.2, 2.0, size=7)
+        origins, destinations = np.array([0, 1, rows * cols - 1, 0]), np.array([rows * cols - 1, cols, 0, cols])
+        want = torch.tensor([_brute(net, w, o, d, horizon) for o, d in zip(origins, destinations)])
+        got = student.eval(CALL, w=w, origins=origins, destinations=destinations, horizon=horizon, **_arrays(net))
+        check_tensor(got, want, rtol=1e-7, atol=1e-9, name=f"log Z on a {rows} x {cols} grid (H = {horizon})")
+
+
+@stub("route_log_partition", points=1, hint=HINT)
+def test_positive_weights_and_loops(student, rng):
+    """Weights that make loops attractive stay finite (routes are capped at H segments)"""
+    net = grid_network(2, 2, seed=0)
+    w = rng.uniform(0.1, 1.0, size=7)
+    want = torch.tensor([_brute(net, w, 0, 3, 6)])
+    got = student.eval(CALL, w=w, origins=np.array([0]), destinations=np.array([3]), horizon=6, **_arrays(net))
+    check_tensor(got, want, rtol=1e-7, name="log Z with positive rewards")
+
+
+@stub("route_log_partition", points=1, hint=HINT)
+def test_shipped_network_matches_reference(student, reference, rng):
+    """The shipped network, 30 trips to mixed destinations, weights scaled by 1 and by 40"""
+    net, trips = load_network(), load_routes()
+    idx = rng.choice(len(trips.origins), size=30, replace=False)
+    for scale in (1.0, 40.0):
+        w = scale * trips.true_weights
+        args = dict(w=w, origins=trips.origins[idx], destinations=trips.destinations[idx], horizon=45, **_arrays(net))
+        check_tensor(student.eval(CALL, **args), reference.eval(CALL, **args), rtol=1e-7, atol=1e-7,
+                     name=f"log Z with the weights scaled by {scale:g}")
+
+
+@stub("route_log_partition", points=1, hint=HINT)
+def test_gradient_is_expected_features(student, rng):
+    """Autograd through log Z gives the expected route features (brute force)"""
+    net = grid_network(2, 3, seed=4)
+    w = -rng.uniform(0.2, 2.0, size=7)
+    routes = enumerate_routes(net, 0, 5, 6)
+    feats = np.stack([net.route_features(r) for r in routes])
+    p = np.exp(feats @ w - logsumexp(feats @ w))
+    expr = (f"torch.autograd.grad({CALL.replace('torch.tensor(w)', '(wt := torch.tensor(w, requires_grad=True))')}"
+            ".sum(), wt)[0]")
+    got = student.eval(expr, w=w, origins=np.array([0]), destinations=np.array([5]), horizon=6, **_arrays(net))
+    check_tensor(got, torch.tensor(p @ feats), rtol=1e-6, atol=1e-9, name="the gradient of log Z")

@@ -1,0 +1,39 @@
+"""The Gradescope bundle, unpacked into a tree laid out as Gradescope lays it out, and run there."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+from autograder.gradescope import build_bundle
+from conftest import REPO
+
+
+def test_bundle_grades_a_submission_in_a_gradescope_layout(tmp_path):
+    bundle = build_bundle("hw0_setup", tmp_path / "hw0_setup.zip")
+    names = zipfile.ZipFile(bundle).namelist()
+    assert {"setup.sh", "run_autograder", "pyproject.toml"} <= set(names)
+    assert any(n.startswith("autograder/suites/hw0_setup/") for n in names)
+    assert not any(n.startswith("autograder/samples/") or "suites/hw1" in n for n in names)
+
+    root = tmp_path / "autograder"
+    source = root / "source"
+    with zipfile.ZipFile(bundle) as z:
+        z.extractall(source)
+    for name in ("setup.sh", "run_autograder"):
+        (source / name).chmod(0o755)
+    # setup.sh installs the pins from the network on Gradescope; here the repository's environment stands in.
+    os.symlink(Path(sys.prefix), source / ".venv")
+    (root / "submission").mkdir()
+    shutil.copy(REPO / "autograder/samples/hw0_setup/partial.ipynb", root / "submission" / "my_work.ipynb")
+    done = subprocess.run(["bash", str(source / "run_autograder")], env=dict(os.environ, GRADESCOPE_ROOT=str(root)),
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    results = json.loads((root / "results" / "results.json").read_text())
+    assert results["score"] == 5
+    assert [t["score"] for t in results["tests"]] == [5, 0]
+    assert all(t["visibility"] == "visible" for t in results["tests"])
