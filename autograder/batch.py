@@ -49,13 +49,15 @@ def _choose(name: str, notebooks: list[Path], assignment: str, expected: list[st
     named = [p for p in notebooks if p.stem == assignment]
     if len(named) == 1:
         chosen = named[0]
-    else:  # the notebook in which the most stubs can be found
-        def stubs_found(path: Path) -> int:
+    else:  # the notebook with the most stubs done (found and no longer raising NotImplementedError)
+        def progress(path: Path) -> tuple[int, int, float]:
             try:
-                return len(find_stubs(read_submission(path)[0], expected)[0])
+                found = find_stubs(read_submission(path)[0], expected)[0]
             except (NotebookError, OSError):
-                return -1
-        chosen = max(notebooks, key=stubs_found)
+                return (-1, -1, 0.0)
+            done = sum("raise NotImplementedError" not in m.source for m in found.values())
+            return (done, len(found), path.stat().st_mtime)
+        chosen = max(notebooks, key=progress)
     others = ", ".join(p.name for p in notebooks if p != chosen)
     return Entry(name, chosen, note=f"several notebooks were submitted; graded {chosen.name} (not {others})")
 

@@ -10,6 +10,7 @@ line of its source and the error, instead of a page of kernel traceback.
 from __future__ import annotations
 
 import ast
+import math
 import re
 import time
 from dataclasses import dataclass
@@ -94,7 +95,7 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
             if cell.cell_type != "code":
                 continue
             count += 1
-            client.timeout = max(1, int(timeout - (time.monotonic() - start)))
+            client.timeout = max(1, math.ceil(timeout - (time.monotonic() - start)))
             try:
                 client.execute_cell(cell, index)
             except CellTimeoutError:

@@ -1,0 +1,64 @@
+"""Student notebooks and the student release: in sync with solutions, and leak-free."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from autograder import course
+from autograder.nbrun import run_notebook
+from autograder.release import build_student_release, find_leaks, generate_assignments, notebook_signature
+from conftest import REPO
+
+
+def test_committed_student_notebooks_equal_a_fresh_regeneration(tmp_path):
+    ids = course.assignment_ids()
+    generate_assignments(ids, release_dir=tmp_path)
+    for assignment in ids:
+        committed = course.release_notebook(assignment)
+        assert committed.exists(), f"{committed} is missing: run `make assignments`"
+        fresh = tmp_path / assignment / f"{assignment}.ipynb"
+        assert notebook_signature(committed) == notebook_signature(fresh), \
+            f"{committed} is out of date with solutions/: run `make assignments`"
+
+
+def test_student_notebooks_carry_no_solutions_markers_or_outputs():
+    assert find_leaks(REPO / "assignments") == []
+
+
+def test_leak_detection_catches_markers_outputs_and_instructor_folders(tmp_path):
+    (tmp_path / "solutions").mkdir()
+    (tmp_path / "a.py").write_text("### BEGIN SOLUTION\n")
+    problems = find_leaks(tmp_path)
+    assert any("solutions/" in p for p in problems) and any("a.py" in p for p in problems)
+
+
+def test_student_release_is_clean_and_hw0_runs_there(tmp_path):
+    out = build_student_release(tmp_path / "release")
+    names = {p.name for p in out.iterdir()}
+    assert names >= {"assignments", "rlcourse", "datasets", "README.md", "pyproject.toml"}
+    assert not (out / "solutions").exists() and not (out / "autograder").exists()
+    assert not list(out.rglob("test_*.py")) and not list(out.rglob("expected.json"))
+    assert find_leaks(out) == []
+    assert "autograder*" not in (out / "pyproject.toml").read_text()  # the package list is rlcourse only
+    env = dict(os.environ, PYTHONPATH=str(out))
+    where = subprocess.run([sys.executable, "-c", "import rlcourse; print(rlcourse.__file__)"], env=env,
+                           capture_output=True, text=True, check=True).stdout
+    assert where.startswith(str(out)), "the release's own rlcourse is the one imported"
+    os.environ["PYTHONPATH"], saved = str(out), os.environ.get("PYTHONPATH")
+    try:
+        report = run_notebook(out / "assignments/hw0_setup/hw0_setup.ipynb", {"FAST": True}, timeout=300,
+                              cwd=tmp_path, until_first_stub=True)
+    finally:
+        os.environ.pop("PYTHONPATH") if saved is None else os.environ.__setitem__("PYTHONPATH", saved)
+    assert report.ok, report.describe("hw0_setup in the release")
+
+
+def test_a_solution_file_in_the_release_is_refused(tmp_path, monkeypatch):
+    import autograder.release as release
+
+    monkeypatch.setattr(release, "RELEASE_DIRS", release.RELEASE_DIRS + ["solutions"])
+    with pytest.raises(SystemExit, match="leak"):
+        build_student_release(tmp_path / "bad")
