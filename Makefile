@@ -7,10 +7,10 @@ STAMP := $(VENV)/.installed
 
 .PHONY: setup demo test assignments student-release datasets-check gradescope bench site figures clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml lectures/requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e .
+	$(PY) -m pip install --quiet -e . -r lectures/requirements.txt
 	$(PY) -m rlcourse.video
 	touch $(STAMP)
 
@@ -45,6 +45,17 @@ gradescope: setup
 ## Every benchmark; each prints the table the README shows.
 bench: setup
 	set -e; for script in bench/bench_*.py; do $(PY) $$script; done
+
+## The lecture site, built from scratch, offline, failing on any warning or unparsable formula.
+site: setup
+	rm -rf lectures/_build
+	$(VENV)/bin/jupyter-book build lectures --warningiserror --nitpick --keep-going
+	$(PY) lectures/check_site.py
+	@echo "open lectures/_build/html/index.html"
+
+## The lecture figures (matplotlib scripts in lectures/figures/).
+figures: setup
+	$(PY) lectures/figures/make_figures.py
 
 clean:
 	rm -rf build .pytest_cache
