@@ -106,6 +106,13 @@ def add(path: str | Path, command: str, seed: int | None, info_: dict[str, Any] 
     return entries[name]
 
 
+def remove(name: str, root: Path = DATASETS) -> None:
+    """Drop ``name`` from the MANIFEST (after its file was deleted on purpose)."""
+    entries = read_manifest(root)
+    entries.pop(name, None)
+    _write_manifest(entries, root)
+
+
 def check_all(root: Path = DATASETS) -> list[str]:
     """Problems with every listed file (empty when all verify); also flags unlisted data files."""
     problems = []
