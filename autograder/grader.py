@@ -9,6 +9,7 @@ fails only the test that met it, with a message meant for the student.
 """
 from __future__ import annotations
 
+import ast
 import contextlib
 import io
 import os
@@ -28,6 +29,7 @@ from autograder.notebook import (NotebookError, find_stubs, imported_modules, ma
 from autograder.sandbox import Limits, Zygote
 from autograder.session import (Cell, CellStatus, LocalTransport, Namespace, SandboxFailure, Session,
                                 StudentError)
+from autograder.wire import ProtocolError, decode, encode
 
 FAST_PARAMETERS = {"FAST": True}
 
@@ -96,8 +98,10 @@ def feedback_message(exc: BaseException) -> str:
 class SuitePlugin:
     """Fixtures for the hidden suites, and the collector of their outcomes."""
 
-    def __init__(self, student: Namespace, reference: Namespace, status: dict[str, CellStatus]) -> None:
+    def __init__(self, student: Namespace, reference: Namespace, status: dict[str, CellStatus],
+                 session: Session | None = None, dependencies: dict[str, list[str]] | None = None) -> None:
         self.student_ns, self.reference_ns, self.status = student, reference, status
+        self.session, self.dependencies = session, dependencies or {}
         self.outcomes: list[TestOutcome] = []
         self.collected: list[tuple[Any, pytest.Item]] = []
 
@@ -110,10 +114,20 @@ class SuitePlugin:
     @pytest.fixture
     def student(self, request: pytest.FixtureRequest) -> Namespace:
         marker = request.node.get_closest_marker("stub")
-        status = self.status.get(marker.kwargs["name"]) if marker else None
+        stub = marker.kwargs["name"] if marker else None
+        status = self.status.get(stub)
         if status is not None and not status.ok:
             pytest.fail(status.message, pytrace=False)
-        return self.student_ns
+        # The other stubs this one calls run as the reference while it is tested: one mistake, one loss.
+        needed = self.dependencies.get(stub, [])
+        if self.session is not None and needed:
+            self.session.stand_in(needed)
+        yield self.student_ns
+        if self.session is not None and needed:
+            try:
+                self.session.restore()
+            except (SandboxFailure, StudentError):
+                pass
 
     @pytest.fixture
     def reference(self) -> Namespace:
@@ -156,6 +170,20 @@ def build_reference(assignment: str) -> dict[str, Any]:
     return namespace
 
 
+def stub_dependencies(assignment: str, stubs: list[str]) -> dict[str, list[str]]:
+    """For each stub, the other stubs its reference solution calls (by name)."""
+    out = {}
+    for cell in read_notebook(course.solution_notebook(assignment)).cells:
+        grade_id = cell.metadata.get("nbgrader", {}).get("grade_id")
+        if cell.cell_type == "code" and grade_id in stubs:
+            try:
+                names = {n.id for n in ast.walk(ast.parse(cell.source)) if isinstance(n, ast.Name)}
+            except SyntaxError:
+                names = set()
+            out[grade_id] = sorted((names & set(stubs)) - {grade_id})
+    return out
+
+
 def _safe_hidden(paths: list[Path]) -> list[str]:
     """Paths to hide, minus any that would hide the course code or the Python environment itself."""
     keep = [Path(p).resolve() for p in (course.REPO, sys.prefix, sys.base_prefix)]
@@ -184,6 +212,20 @@ class Grader:
         self.hidden = _safe_hidden([*course.secret_paths(), *hidden])
         self.readonly = sorted({str(Path(p).resolve()) for p in (course.REPO, course.INSTALLED, sys.prefix)})
         self.catalogue = self._catalogue()
+        self.dependencies = stub_dependencies(assignment, self.expected)
+
+    def _reference_call(self, name: str, tree: Any, blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
+        """Run reference ``name`` for a stand-in in the sandbox; plain data in and out, never handles."""
+        def refuse(id: int, type_name: str) -> Any:
+            raise ProtocolError("objects cannot be sent to the reference")
+
+        try:
+            args, kwargs = decode(tree, blobs, refuse)
+            value = self.reference_ns[name](*args, **kwargs)
+            out_tree, out_blobs = encode(value)
+            return {"ok": True, "value": out_tree}, out_blobs
+        except Exception as err:  # noqa: BLE001 - reported to the student's code as an exception
+            return {"ok": False, "error": f"{type(err).__name__}: {str(err)[:300]}"}, []
 
     def _catalogue(self) -> list[TestOutcome]:
         """Every hidden test with its stub and points (collected, not run), for results that cannot run."""
@@ -227,8 +269,10 @@ class Grader:
                     session.status[stub] = CellStatus(False, "the notebook's setup failed in the grader: "
                                                              + broken_setup[0])
             result.isolation = session.isolation
-            plugin = SuitePlugin(Namespace(session, "student"), Namespace(LocalTransport(self.reference_ns),
-                                                                            "reference"), session.status)
+            session.reference_call = self._reference_call
+            plugin = SuitePlugin(Namespace(session, "student"),
+                                 Namespace(LocalTransport(self.reference_ns), "reference"), session.status,
+                                 session, self.dependencies)
             self._run_suite(plugin)
         except SandboxFailure as err:
             return self._ungradable(result, str(err), start)

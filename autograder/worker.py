@@ -31,13 +31,49 @@ def format_error(err: BaseException) -> str:
     return text + ("\n" + "\n".join(lines) if lines else "")
 
 
+_UNDEFINED = object()
+
+
+def _undefined(name: str) -> Any:
+    def missing(*args: Any, **kwargs: Any) -> Any:
+        raise NameError(f"name '{name}' is not defined")
+    return missing
+
+
 class Worker:
     """The namespace of one submission and a table of the objects handed out as handles."""
 
-    def __init__(self) -> None:
+    def __init__(self, channel: tuple[FrameReader, int] | None = None) -> None:
         self.namespace: dict[str, Any] = {"__name__": "__main__", "__builtins__": builtins}
         self.handles: dict[int, Any] = {}
         self.next_handle = 1
+        self.channel = channel
+        self.replaced: dict[str, Any] = {}
+
+    def reference_stand_in(self, name: str, own: Any) -> Any:
+        """A function that asks the grader to run the reference ``name`` on plain data.
+
+        While a stub is tested, the other stubs it calls are replaced by these, so a mistake in one
+        stub does not fail the stubs that use it. Calls whose arguments cannot cross as data (a
+        network, a tensor that needs gradients) run the student's own version instead.
+        """
+        reader, write_fd = self.channel
+
+        def stand_in(*args: Any, **kwargs: Any) -> Any:
+            try:
+                if any(getattr(a, "requires_grad", False) for a in (*args, *kwargs.values())):
+                    raise TypeError("needs gradients")
+                tree, blobs = encode([list(args), kwargs])
+            except (TypeError, ValueError):
+                return own(*args, **kwargs)
+            send_message(write_fd, {"callback": name, "args": tree}, blobs)
+            header, reply_blobs = reader.read_message()
+            if header.get("ok") is not True:
+                raise RuntimeError(f"the grader's reference `{name}` failed on these arguments: {header.get('error')}")
+            return decode(header.get("value"), reply_blobs, self.from_handle)
+
+        stand_in.__name__ = name
+        return stand_in
 
     def to_handle(self, obj: Any) -> HandleRef:
         self.handles[self.next_handle] = obj
@@ -72,6 +108,21 @@ class Worker:
             scope = dict(self.namespace)
             scope.update(self.args(header, blobs, "bindings"))
             return eval(compile(str(header["expr"]), "<grader>", "eval"), scope)
+        if op == "stand_in":  # replace the named stubs by reference stand-ins until "restore"
+            for name in header["names"]:
+                if name not in self.replaced:
+                    self.replaced[name] = self.namespace.get(name, _UNDEFINED)
+                    own = self.replaced[name] if self.replaced[name] is not _UNDEFINED else _undefined(name)
+                    self.namespace[name] = self.reference_stand_in(name, own)
+            return None
+        if op == "restore":
+            for name, value in self.replaced.items():
+                if value is _UNDEFINED:
+                    self.namespace.pop(name, None)
+                else:
+                    self.namespace[name] = value
+            self.replaced.clear()
+            return None
         if op == "release":
             for id in header["ids"]:
                 self.handles.pop(id, None)
@@ -81,7 +132,8 @@ class Worker:
 
 def serve(read_fd: int, write_fd: int) -> None:
     """Answer requests until the grader closes the channel."""
-    worker, reader = Worker(), FrameReader(read_fd)
+    reader = FrameReader(read_fd)
+    worker = Worker(channel=(reader, write_fd))
     send_message(write_fd, {"ok": True, "ready": True})
     while True:
         try:
@@ -93,4 +145,8 @@ def serve(read_fd: int, write_fd: int) -> None:
             tree, out_blobs = encode(value, worker.to_handle)
             send_message(write_fd, {"ok": True, "value": tree}, out_blobs)
         except BaseException as err:  # noqa: BLE001 - SystemExit and KeyboardInterrupt are the student's too
-            send_message(write_fd, {"ok": False, "kind": type(err).__name__[:80], "error": format_error(err)})
+            try:
+                message = format_error(err)
+            except BaseException:  # noqa: BLE001 - an exception whose str() itself fails
+                message = f"{type(err).__name__} (its message could not be printed)"
+            send_message(write_fd, {"ok": False, "kind": type(err).__name__[:80], "error": message})

@@ -194,6 +194,22 @@ CASES = {
                 sys.stdout.write("x" * 4096)
             return None
         """,
+    "stash_a_reference_stand_in": {
+        "scaled_sum": """
+            STASH = []
+            def scaled_sum(x):
+                if STASH:
+                    try:
+                        return STASH[0](x)  # must be refused: nothing stands in while scaled_sum is tested
+                    except Exception:
+                        pass
+                return None
+            """,
+        "double_scaled": """
+            def double_scaled(x):
+                STASH.append(scaled_sum)    # the reference stand-in, while double_scaled is tested
+                return None
+            """},
     "recursion_and_deep_nesting": """
         def scaled_sum(x):
             value = []
@@ -220,8 +236,9 @@ def corpus(open_tmp):
     port = server.getsockname()[1]
     folder = open_tmp / "submissions"
     for name, code in CASES.items():
+        cells = code if isinstance(code, dict) else {"scaled_sum": code}
         with_cells(FIXTURE_COURSE / "assignments/fx/fx.ipynb", folder / f"{name}.ipynb",
-                   {"scaled_sum": _case_source(code, port, str(open_tmp / "out"))})
+                   {cell: _case_source(source, port, str(open_tmp / "out")) for cell, source in cells.items()})
     yield folder, open_tmp / "out"
     server.close()
 
@@ -242,7 +259,7 @@ def _check_gradebook(out):
     assert not over, f"cheating cases scored above an honest empty submission: {over}"
     for name in CASES:  # the results are the grader's, not the student's forgeries
         data = json.loads((out / name / "results.json").read_text())
-        assert data["score"] == 0 and len(data["tests"]) == 3
+        assert data["score"] == 0 and len(data["tests"]) == 4
 
 
 def test_corpus_scores_nothing_as_root(corpus, monkeypatch):

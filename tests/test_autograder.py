@@ -12,6 +12,7 @@ from conftest import REPO, with_cells
 SOLVED = {
     "scaled_sum": "def scaled_sum(x):\n    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)",
     "mean_of": "def mean_of(values):\n    return float(np.mean(values))",
+    "double_scaled": "def double_scaled(x):\n    return 2 * scaled_sum(x)",
 }
 
 
@@ -43,13 +44,13 @@ def scores(result):
 def test_reference_solution_scores_full_marks(fx_grader):
     result = fx_grader.grade(REPO / "tests/fixtures/course/solutions/fx/fx.ipynb")
     assert result.error is None
-    assert result.score == result.max_score == 6
+    assert result.score == result.max_score == 7
     assert result.isolation in ("full", "user-namespace")
 
 
 def test_student_notebook_scores_zero_with_not_implemented(fx_grader):
     result = fx_grader.grade(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb")
-    assert result.score == 0 and result.max_score == 6
+    assert result.score == 0 and result.max_score == 7
     for stub in result.stubs:
         assert all("not implemented" in t.message for t in stub.tests), stub
 
@@ -57,7 +58,8 @@ def test_student_notebook_scores_zero_with_not_implemented(fx_grader):
 def test_half_done_submission_gets_credit_exactly_on_completed_stubs(fx_grader, tmp_path):
     nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "half.ipynb",
                     {"scaled_sum": SOLVED["scaled_sum"]})
-    assert scores(fx_grader.grade(nb)) == {"scaled_sum": (3, 3), "Counter": (0, 2), "mean_of": (0, 1)}
+    assert scores(fx_grader.grade(nb)) == {"scaled_sum": (3, 3), "Counter": (0, 2), "mean_of": (0, 1),
+                                           "double_scaled": (0, 1)}
 
 
 def test_objects_come_back_as_handles_whose_methods_run_in_the_sandbox(fx_grader, tmp_path):
@@ -95,3 +97,24 @@ def test_hw0_samples_score_as_expected(hw0_grader, sample):
     for stub in result.stubs:
         want = stub.max_score if expected[stub.name] == "full" else 0
         assert stub.score == want, (sample, stub.name, [t.message for t in stub.tests])
+
+
+@pytest.mark.parametrize("broken", [
+    "def scaled_sum(x):\n    return -x.sum(axis=0)",          # wrong
+    "def scaled_sum(x):\n    return )(",                        # does not even parse
+    None,                                                         # deleted
+])
+def test_a_stub_that_calls_a_broken_stub_is_graded_on_its_own(fx_grader, tmp_path, broken):
+    nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "dep.ipynb",
+                    {"scaled_sum": broken, "double_scaled": SOLVED["double_scaled"]})
+    got = scores(fx_grader.grade(nb))
+    assert got["scaled_sum"] == (0, 3) and got["double_scaled"] == (1, 1)
+
+
+def test_stand_ins_are_restored_after_the_test(fx_grader, tmp_path):
+    """double_scaled's test runs the reference scaled_sum; scaled_sum's own tests see the student's again."""
+    nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "dep.ipynb",
+                    {"scaled_sum": "def scaled_sum(x):\n    return x.sum(axis=-1)",  # forgets SCALE
+                     "double_scaled": SOLVED["double_scaled"]})
+    got = scores(fx_grader.grade(nb))
+    assert got["scaled_sum"][0] < 3 and got["double_scaled"] == (1, 1)

@@ -47,7 +47,7 @@ def test_unreadable_files_are_ungradable_with_a_reason(grader, tmp_path, content
     path.write_bytes(content)
     result = grader.grade(path)
     assert result.error and message in result.error
-    assert result.score == 0 and result.max_score == 6  # every test is listed, at zero
+    assert result.score == 0 and result.max_score == 7  # every test is listed, at zero
 
 
 def test_a_huge_notebook_is_refused_before_parsing(grader, tmp_path):
@@ -69,7 +69,7 @@ def test_stripped_metadata_and_reordered_cells_still_grade_fully(grader, tmp_pat
     path = tmp_path / "stripped.ipynb"
     nbformat.write(nb, str(path))
     result = grader.grade(path)
-    assert result.score == 6
+    assert result.score == 7
     assert any("found by the name" in note for note in result.notes)
 
 
@@ -80,14 +80,14 @@ def test_renamed_grade_ids_fall_back_to_the_defined_name(grader, tmp_path):
             cell.metadata["nbgrader"]["grade_id"] = "cell-" + str(id(cell))
     path = tmp_path / "renamed.ipynb"
     nbformat.write(nb, str(path))
-    assert grader.grade(path).score == 6
+    assert grader.grade(path).score == 7
 
 
 def test_deleted_cells_cost_only_their_stub(grader, tmp_path):
     path = with_cells(solved_copy(tmp_path), tmp_path / "deleted.ipynb", {"Counter": None})
     result = grader.grade(path)
     by_stub = {s.name: s for s in result.stubs}
-    assert result.score == 4 and by_stub["Counter"].score == 0
+    assert result.score == 5 and by_stub["Counter"].score == 0
     assert "no cell defines `Counter`" in by_stub["Counter"].tests[0].message
 
 
@@ -97,7 +97,7 @@ def test_non_utf8_is_read_with_a_note(grader, tmp_path):
     raw["cells"][0]["source"] = "# café"
     path.write_bytes(json.dumps(raw, ensure_ascii=False).encode("latin-1"))
     result = grader.grade(path)
-    assert result.score == 6 and any("UTF-8" in note for note in result.notes)
+    assert result.score == 7 and any("UTF-8" in note for note in result.notes)
 
 
 def test_old_format_3_notebooks_are_converted(grader, tmp_path):

@@ -61,10 +61,11 @@ def test_mm_random_instance_with_ties(student, reference, rng):
     check_array(student.fit_bradley_terry_mm(10, i, j, mu), reference.fit_bradley_terry(10, i, j, mu), atol=1e-4)
 
 
-@stub("fit_bradley_terry_mm", points=1, hint="Both fits maximise the same likelihood: they must agree.")
-def test_mm_agrees_with_students_gd(student, rng):
-    """Your two fits agree with each other on a random instance"""
+@stub("fit_bradley_terry_mm", points=1, hint="Iterate until the log-strengths stop moving (tol), not a fixed few steps.")
+def test_mm_reaches_a_stationary_point(student, reference, rng):
+    """The MM fit of a random instance is a stationary point of the mean loss"""
     _, i, j, mu = _random_instance(rng, 12, 1000)
-    gd = student.fit_bradley_terry(12, i, j, mu)
-    assert isinstance(gd, np.ndarray), "fit_bradley_terry must work first"
-    check_array(student.fit_bradley_terry_mm(12, i, j, mu), gd, atol=1e-4, name="the MM utilities")
+    got = student.fit_bradley_terry_mm(12, i, j, mu)
+    assert isinstance(got, np.ndarray) and got.shape == (12,), f"expected 12 utilities, got {np.shape(got)}"
+    grad = reference.bt_gradient(got, i, j, mu)
+    assert np.abs(grad).max() < 1e-7, f"the gradient of the loss at your fit is {np.abs(grad).max():.1e}, not ~0"

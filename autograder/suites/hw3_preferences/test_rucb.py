@@ -74,3 +74,13 @@ def test_converges_to_condorcet_winner(student, rng):
         share = np.mean(pairs[-800:] == best)
         assert share > 0.7, (f"on {name}, only {share:.0%} of the arms played in the last 800 duels are the Condorcet "
                              f"winner (arm {best}); RUCB should be dueling it against itself by then")
+
+
+@stub("rucb", points=1, hint="Keep the confidence bonus sqrt(alpha ln t / N): without it an early unlucky loss "
+                             "can rule the best arm out for good.")
+def test_does_not_lock_onto_early_luck(student):
+    """A small gap (P = 0.6), 10 runs: the best arm dominates the late duels on average"""
+    P = np.array([[0.5, 0.6, 0.6], [0.4, 0.5, 0.6], [0.4, 0.4, 0.5]])
+    shares = [np.mean(_run(student, P, 2000, seed)[-500:] == 0) for seed in range(10)]
+    assert np.mean(shares) > 0.6, (f"the best arm (0) is only {np.mean(shares):.0%} of the arms played in the last 500 "
+                                   f"duels on average over 10 runs (per run: {np.round(shares, 2).tolist()})")
