@@ -24,6 +24,7 @@ from typing import NamedTuple
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy.ndimage import gaussian_filter
+from scipy.sparse import csr_array
 
 ACTIONS = ("stay", "up", "down", "left", "right")
 MOVES = np.array([[0, 0], [-1, 0], [1, 0], [0, -1], [0, 1]])  # (A, 2) row/col offsets
@@ -49,7 +50,7 @@ class GridMDP:
     horizon: int              # T: number of visited states per trajectory
     true_reward: np.ndarray   # (S,) hidden reward, for evaluation only
     true_weights: np.ndarray | None  # (F,) when true_reward = features @ true_weights
-    beta: float = 5.0         # the expert's rationality (inverse temperature)
+    beta: float = 2.0         # the expert's rationality (inverse temperature)
 
     @property
     def n_states(self) -> int:
@@ -109,11 +110,17 @@ def _sample_rows(probs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def optimal_q_values(P: np.ndarray, reward: np.ndarray, horizon: int) -> np.ndarray:
     """Optimal finite-horizon action values ``Q*[t, s, a]`` (hard value iteration, ``(T, S, A)``)."""
     q = np.empty((horizon, *P.shape[:2]))
+    P_flat = _sparse_rows(P)
     v_next = np.zeros(P.shape[0])
     for t in reversed(range(horizon)):
-        q[t] = reward[:, None] + P @ v_next
+        q[t] = reward[:, None] + (P_flat @ v_next).reshape(P.shape[:2])
         v_next = q[t].max(axis=1)
     return q
+
+
+def _sparse_rows(P: np.ndarray) -> csr_array:
+    """``P[s, a, s']`` as a sparse ``(S * A, S)`` matrix (grid dynamics have a handful of successors)."""
+    return csr_array(np.asarray(P, dtype=float).reshape(-1, P.shape[-1]))
 
 
 def boltzmann_policy(q: np.ndarray, beta: float) -> np.ndarray:
@@ -126,14 +133,15 @@ def boltzmann_policy(q: np.ndarray, beta: float) -> np.ndarray:
 def policy_return(P: np.ndarray, policy: np.ndarray, reward: np.ndarray, p0: np.ndarray) -> float:
     """Exact expected sum of ``reward(s_t)`` over ``t < T`` under a ``(T, S, A)`` policy
     (backward policy evaluation)."""
+    P_flat = _sparse_rows(P)
     v = np.zeros(P.shape[0])
     for t in reversed(range(policy.shape[0])):
-        v = reward + (policy[t] * (P @ v)).sum(axis=1)
+        v = reward + (policy[t] * (P_flat @ v).reshape(P.shape[:2])).sum(axis=1)
     return float(p0 @ v)
 
 
 def terrain_grid(size: int = 20, horizon: int = 50, slip: float = 0.1, seed: int = 0,
-                 beta: float = 5.0) -> GridMDP:
+                 beta: float = 2.0) -> GridMDP:
     """A gridworld of roads, grass, mud and rocks with a goal region, and a linear hidden reward.
 
     Features (F = 5): one-hot terrain (road, grass, mud, rocks) and a goal indicator. The expert
@@ -160,7 +168,7 @@ def terrain_grid(size: int = 20, horizon: int = 50, slip: float = 0.1, seed: int
 
 
 def object_grid(size: int = 16, horizon: int = 32, slip: float = 0.1, n_objects: int = 12,
-                seed: int = 0, beta: float = 5.0) -> GridMDP:
+                seed: int = 0, beta: float = 2.0) -> GridMDP:
     """A gridworld whose true reward is *not* linear in its features (for deep MaxEnt IRL).
 
     Objects of four colours sit on random cells. The features of a cell are its distances to
@@ -184,7 +192,7 @@ def object_grid(size: int = 16, horizon: int = 32, slip: float = 0.1, n_objects:
 
 
 def random_mdp(n_states: int, n_actions: int, n_features: int, horizon: int, seed: int,
-               branching: int = 3, beta: float = 5.0) -> GridMDP:
+               branching: int = 3, beta: float = 2.0) -> GridMDP:
     """A random MDP (not a grid: ``size`` is 0) with sparse stochastic dynamics, Gaussian features
     and a random linear reward; for tests."""
     rng = np.random.default_rng(seed)
