@@ -20,11 +20,24 @@ def _cmd_grade(args: argparse.Namespace) -> int:
     from autograder.grader import Grader
     from autograder.report import summary_lines, write_outputs
 
+    from autograder import course
+    from autograder.batch import choose_notebook, notebooks_in
+
+    notebook, note = args.notebook, ""
+    if notebook.is_dir():  # a submission folder: pick its notebook as batch grading would
+        course.check_assignment(args.assignment)
+        entry = choose_notebook(notebook.name, notebooks_in(notebook), args.assignment,
+                                course.stub_names(args.assignment))
+        if entry.notebook is None:
+            raise SystemExit(f"{notebook}: {entry.problem}")
+        notebook, note = entry.notebook, entry.note
     grader = Grader(args.assignment, hidden=[args.out])
     try:
-        result = grader.grade(args.notebook)
+        result = grader.grade(notebook)
     finally:
         grader.close()
+    if note:
+        result.notes.insert(0, note)
     write_outputs(result, args.out)
     _warn_isolation(result.isolation)
     print("\n".join(summary_lines(result)))
@@ -42,6 +55,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     from autograder.batch import GRADEBOOK_NAME, run_batch
 
     results = run_batch(args.assignment, args.folder, args.out, jobs=args.jobs)
+    _warn_isolation("none" if any(r.isolation == "none" for r in results) else "full")
     graded = sum(1 for r in results if not r.error)
     print(f"{len(results)} submissions ({graded} graded, {len(results) - graded} ungradable); "
           f"gradebook: {args.out / GRADEBOOK_NAME}")

@@ -19,7 +19,7 @@ from tqdm.auto import tqdm
 
 from autograder import course
 from autograder.grader import GradeResult, Grader
-from autograder.notebook import NotebookError, find_stubs, read_notebook, read_submission, release_plan
+from autograder.notebook import NotebookError, find_stubs, read_submission
 from autograder.report import RESULT_NAME, result_from_dict, write_gradebook, write_outputs
 
 GRADEBOOK_NAME = "gradebook.csv"
@@ -37,11 +37,11 @@ def _safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "submission"
 
 
-def _notebooks_in(folder: Path) -> list[Path]:
+def notebooks_in(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*.ipynb") if ".ipynb_checkpoints" not in p.parts and p.is_file())
 
 
-def _choose(name: str, notebooks: list[Path], assignment: str, expected: list[str]) -> Entry:
+def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected: list[str]) -> Entry:
     if not notebooks:
         return Entry(name, None, problem="no notebook (.ipynb) in this submission")
     if len(notebooks) == 1:
@@ -77,7 +77,7 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
             entries.append(Entry(child.stem, child))
         elif child.is_dir():
             inner = child / assignment if (child / assignment).is_dir() else child
-            entries.append(_choose(child.name, _notebooks_in(inner), assignment, expected))
+            entries.append(choose_notebook(child.name, notebooks_in(inner), assignment, expected))
     names = [e.name for e in entries]
     for e in entries:  # keep folder names unique on disk
         e.name = _safe_name(e.name) if names.count(e.name) == 1 else _safe_name(f"{e.name}_{id(e)}")
@@ -118,7 +118,7 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     """Grade every submission not yet graded in ``out_dir``, then write the gradebook of all of them."""
     out_dir = Path(out_dir)
     course.check_assignment(assignment)
-    expected = [c.label for c in release_plan(read_notebook(course.release_notebook(assignment))) if c.kind == "stub"]
+    expected = course.stub_names(assignment)
     entries = discover(folder, assignment, expected)
     todo = [e for e in entries if e.notebook is not None and _load(out_dir, e.name) is None]
     for e in entries:

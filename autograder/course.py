@@ -38,6 +38,13 @@ def check_assignment(assignment: str) -> None:
         raise SystemExit(f"unknown or ungradable assignment {assignment!r}; gradable ones: {known}")
 
 
+def stub_names(assignment: str) -> list[str]:
+    """The graded stubs of an assignment, in notebook order (from its student notebook)."""
+    from autograder.notebook import read_notebook, release_plan
+
+    return [c.label for c in release_plan(read_notebook(release_notebook(assignment))) if c.kind == "stub"]
+
+
 def limits(assignment: str) -> "Limits":
     """The sandbox limits of an assignment: defaults, overridden by its suite's ``limits.json``."""
     import json

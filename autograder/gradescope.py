@@ -79,15 +79,14 @@ def build_bundle(assignment: str, out: Path | None = None) -> Path:
 
 def run(assignment: str, root: Path) -> int:
     """Grade the one submission under ``root/submission`` into ``root/results/results.json``."""
-    from autograder.batch import _choose
+    from autograder.batch import choose_notebook
     from autograder.grader import Grader
-    from autograder.notebook import read_notebook, release_plan
     from autograder.report import gradescope_results
 
     results = root / "results" / "results.json"
     results.parent.mkdir(parents=True, exist_ok=True)
-    expected = [c.label for c in release_plan(read_notebook(course.release_notebook(assignment))) if c.kind == "stub"]
-    entry = _choose("submission", sorted((root / "submission").rglob("*.ipynb")), assignment, expected)
+    entry = choose_notebook("submission", sorted((root / "submission").rglob("*.ipynb")), assignment,
+                            course.stub_names(assignment))
     grader = Grader(assignment, hidden=[root / "submission", root / "results"])
     try:
         if entry.notebook is None:
