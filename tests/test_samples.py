@@ -1,0 +1,24 @@
+"""Every assignment's sample submissions grade as their expected.json says (the demo's promise)."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from autograder import course
+from autograder.batch import run_batch
+
+WITH_SAMPLES = [i for i in course.assignment_ids() if (course.samples_dir(i) / "expected.json").exists()]
+
+
+@pytest.mark.parametrize("assignment", WITH_SAMPLES)
+def test_samples_score_as_expected(assignment, open_tmp):
+    expected = json.loads((course.samples_dir(assignment) / "expected.json").read_text())
+    results = {r.submission: r for r in run_batch(assignment, course.samples_dir(assignment), open_tmp / "out",
+                                                  jobs=2, progress=False)}
+    assert set(results) == set(expected)
+    for sample, outcome in expected.items():
+        for stub in results[sample].stubs:
+            want = stub.max_score if outcome[stub.name] == "full" else 0
+            assert stub.max_score > 0 and stub.score == want, \
+                (sample, stub.name, [t.message for t in stub.tests if not t.passed][:2])
