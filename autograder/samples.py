@@ -66,10 +66,17 @@ def _with_stubs(assignment: str, sources: dict[str, str]) -> nbformat.NotebookNo
 
 
 def make_samples(assignment: str) -> dict[str, tuple[nbformat.NotebookNode, dict[str, str]]]:
-    """Each sample notebook with the outcome expected per stub ("full" or "zero")."""
+    """Each sample notebook with the outcome expected per stub ("full" or "zero").
+
+    The broken samples break a stub that no other stub calls, so that "the rest is done" means
+    full marks on the rest whatever the grader can stand in for (see ``Worker.reference_stand_in``).
+    """
+    from autograder.grader import stub_dependencies
+
     solved = solution_sources(assignment)
     stubs = list(solved)
-    first = stubs[0]
+    called = {d for deps in stub_dependencies(assignment, stubs).values() for d in deps}
+    first = next((s for s in stubs if s not in called), stubs[-1])
     done_half = stubs[: math.ceil(len(stubs) / 2)]
     samples = {
         "complete": (solved, {s: "full" for s in stubs}),
