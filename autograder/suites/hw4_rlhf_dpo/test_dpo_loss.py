@@ -17,8 +17,8 @@ CALL = f"dpo_loss({SHIFTED}, {REF}, (co, ca), (ro, ra), beta)"
 def _policy(s, ls, shift=0.0, dstd=0.0):
     torch.manual_seed(s)
     p = GaussianPolicy(11, 3, hidden=(8,), log_std_init=ls)
-    p.mean.bias.data.add_(shift)
-    p.log_std.data.add_(dstd)
+    p.mean.bias.data.add_(torch.as_tensor(shift, dtype=torch.float32))
+    p.log_std.data.add_(torch.as_tensor(dstd, dtype=torch.float32))
     return p
 
 

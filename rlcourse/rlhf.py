@@ -1,0 +1,195 @@
+"""Shared pieces of hw4_rlhf_dpo that are not the students' stubs.
+
+* :func:`load_reference` — the reference ("SFT") policy, cloned from a mid-skill checkpoint
+  (``datasets/hw4/reference_policy.pt``, made by ``datasets/scripts/make_reference_policy.py``).
+* :func:`fit_reward_model` — the Bradley–Terry reward ensemble of hw3, trained on labelled segment
+  pairs (hw3 asks students to write it; hw4 takes it as given), and :func:`reward_function`, its
+  batched numpy form for an environment wrapper.
+* :func:`oriented_pairs` — labelled pairs turned into (chosen, rejected) segment tensors, ties left out.
+* :func:`evaluate_policy` — deterministic true return, the KL to the reference on the visited states,
+  and optionally the learned return, of one policy.
+* :func:`train_dpo` — the DPO training loop, which calls the student's ``dpo_loss``.
+"""
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+from torch.distributions import kl_divergence
+
+from rlcourse import data as _data
+from rlcourse.nets import GaussianPolicy
+from rlcourse.preferences import RewardEnsemble
+from rlcourse.rollouts import rollout
+
+ENV_ID = "Hopper-v5"
+REFERENCE_FILE = "hw4/reference_policy.pt"
+EVAL_SEED = 1000
+
+
+def load_reference() -> GaussianPolicy:
+    """The frozen reference policy (its ``metadata`` holds the measured return over 20 episodes)."""
+    return _data.load_policy(REFERENCE_FILE).requires_grad_(False)
+
+
+# --------------------------------------------------------------------------- reward model (hw3)
+def _segment_bt_loss(member, obs_a, act_a, obs_b, act_b, mu) -> torch.Tensor:
+    d = member(obs_a, act_a).sum(-1) - member(obs_b, act_b).sum(-1)
+    return -(mu * torch.nn.functional.logsigmoid(d) + (1 - mu) * torch.nn.functional.logsigmoid(-d)).mean()
+
+
+def fit_reward_model(obs: np.ndarray, act: np.ndarray, pairs: np.ndarray, mu: np.ndarray, n_members: int = 3,
+                     n_steps: int = 1500, batch_size: int = 64, lr: float = 1e-3, weight_decay: float = 1e-4,
+                     seed: int = 0) -> RewardEnsemble:
+    """A reward ensemble fitted by the Bradley–Terry loss on segment pairs (each member on a bootstrap).
+
+    ``obs`` ``(N, L, 11)``, ``act`` ``(N, L, 3)``: all segments; ``pairs`` ``(M, 2)`` indices into them,
+    ``mu`` ``(M,)`` labels (1: first preferred, 0: second, 0.5: tie, counted as half a win each).
+    Each member's per-step output is normalised to mean 0 and standard deviation 1 on the segments
+    used, so a step of a typical data segment earns about 0.
+    """
+    obs_t, act_t = torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(act, dtype=torch.float32)
+    pairs, mu_t = np.asarray(pairs), torch.as_tensor(np.asarray(mu), dtype=torch.float32)
+    used = np.unique(pairs)
+    ensemble = RewardEnsemble(obs_t.shape[-1], act_t.shape[-1], n_members, seed=seed)
+    ensemble.set_input_scaling(obs_t[used], act_t[used])
+    rng = np.random.default_rng(seed)
+    for k in range(n_members):
+        member, boot = ensemble.member(k), rng.integers(len(pairs), size=len(pairs))
+        opt = torch.optim.Adam(member.parameters(), lr=lr, weight_decay=weight_decay)
+        for _ in range(n_steps):
+            batch = boot[rng.integers(len(boot), size=batch_size)]
+            a, b = pairs[batch, 0], pairs[batch, 1]
+            loss = _segment_bt_loss(member, obs_t[a], act_t[a], obs_t[b], act_t[b], mu_t[batch])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    return ensemble.normalise_(obs_t[used], act_t[used]).eval()
+
+
+def reward_function(ensemble: RewardEnsemble) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``r(obs, act)``: the ensemble's mean per-step reward for a batch, ``(n, 11), (n, 3) -> (n,)`` float32."""
+    def r(obs: np.ndarray, act: np.ndarray) -> np.ndarray:
+        return ensemble.predict(np.asarray(obs, np.float32), np.asarray(act, np.float32)).mean(0).astype(np.float32)
+    return r
+
+
+# --------------------------------------------------------------------------- preference pairs
+@dataclass
+class SegmentPairs:
+    """Segment pairs oriented by their label: ``chosen_obs`` ``(B, L, 11)``, ``chosen_act`` ``(B, L, 3)``,
+    and the same for ``rejected``; all float32 tensors. Ties are not included."""
+
+    chosen_obs: torch.Tensor
+    chosen_act: torch.Tensor
+    rejected_obs: torch.Tensor
+    rejected_act: torch.Tensor
+
+    def __len__(self) -> int:
+        return len(self.chosen_obs)
+
+    def batch(self, idx) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
+        """``(chosen, rejected)`` for rows ``idx``, each an ``(obs, act)`` tuple."""
+        return (self.chosen_obs[idx], self.chosen_act[idx]), (self.rejected_obs[idx], self.rejected_act[idx])
+
+
+def oriented_pairs(obs: np.ndarray, act: np.ndarray, pairs: np.ndarray, mu: np.ndarray) -> SegmentPairs:
+    """Labelled pairs ``(M, 2)`` with labels ``mu`` ``(M,)`` as chosen/rejected segments; ties (0.5) dropped."""
+    pairs, mu = np.asarray(pairs), np.asarray(mu)
+    strict = mu != 0.5
+    first_wins = mu[strict] == 1.0
+    chosen = np.where(first_wins, pairs[strict, 0], pairs[strict, 1])
+    rejected = np.where(first_wins, pairs[strict, 1], pairs[strict, 0])
+    t = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float32)
+    return SegmentPairs(t(obs[chosen]), t(act[chosen]), t(obs[rejected]), t(act[rejected]))
+
+
+# --------------------------------------------------------------------------- evaluation
+def mean_kl(policy: GaussianPolicy, reference: GaussianPolicy, obs: np.ndarray | torch.Tensor) -> float:
+    """Average over the given states of ``KL(pi(.|s) || pi_ref(.|s))`` (exact, diagonal Gaussians), in nats."""
+    obs = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
+    with torch.no_grad():
+        return float(kl_divergence(policy.distribution(obs), reference.distribution(obs)).mean())
+
+
+def evaluate_policy(policy: GaussianPolicy, reference: Optional[GaussianPolicy] = None,
+                    reward_fn: Optional[Callable] = None, n_episodes: int = 10, seed: int = EVAL_SEED,
+                    max_steps: Optional[int] = None) -> dict[str, float]:
+    """Deterministic episodes of ``policy``: ``return`` (mean true return), ``return_std``, ``length``,
+    and, when given, ``kl`` (per-step KL to ``reference`` on the visited states) and ``learned_return``
+    (the return under ``reward_fn``)."""
+    eps = rollout(policy.act, ENV_ID, n_episodes, seed=seed, max_steps=max_steps, progress=False)
+    out = {"return": float(eps.returns.mean()), "return_std": float(eps.returns.std()),
+           "length": float(eps.lengths.mean())}
+    obs, act = eps.flat()
+    if reference is not None:
+        out["kl"] = mean_kl(policy, reference, obs)
+    if reward_fn is not None:
+        learned = np.zeros(eps.mask.shape, dtype=np.float32)
+        learned[eps.mask] = reward_fn(obs, act)
+        out["learned_return"] = float(learned.sum(1).mean())
+    return out
+
+
+# --------------------------------------------------------------------------- DPO
+@dataclass
+class DPOLog:
+    """One dict per logged step (``step``, ``time``, ``loss``, ``margin``, ``accuracy``, and the held-out
+    ``val_margin``, ``val_accuracy``) in ``steps``; one per evaluation in ``evals``."""
+
+    config: dict
+    steps: list[dict] = field(default_factory=list)
+    evals: list[dict] = field(default_factory=list)
+
+    def series(self, key: str, source: str = "evals") -> tuple[np.ndarray, np.ndarray]:
+        rows = [r for r in getattr(self, source) if key in r]
+        return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
+
+
+def train_dpo(policy: GaussianPolicy, reference: GaussianPolicy, dpo_loss: Callable, train: SegmentPairs,
+              beta: float, n_steps: int = 1000, batch_size: int = 64, lr: float = 3e-4,
+              val: Optional[SegmentPairs] = None, evaluate: Optional[Callable[[GaussianPolicy], dict]] = None,
+              eval_every: int = 250, log_every: int = 25, seed: int = 0, verbose: bool = True,
+              ) -> tuple[GaussianPolicy, DPOLog]:
+    """Fine-tune a copy of ``policy`` on preference pairs with ``dpo_loss(policy, reference, chosen,
+    rejected, beta) -> (loss, info)`` (``info`` holds ``margin`` and ``accuracy``), Adam, minibatches
+    of ``batch_size`` pairs drawn with replacement. Returns the trained copy and the log."""
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    actor = copy.deepcopy(policy).train().requires_grad_(True)
+    reference = copy.deepcopy(reference).eval().requires_grad_(False)
+    opt = torch.optim.Adam(actor.parameters(), lr=lr)
+    log = DPOLog(config=dict(beta=beta, n_steps=n_steps, batch_size=batch_size, lr=lr, seed=seed))
+    start = time.perf_counter()
+
+    def run_evaluation(step: int) -> None:
+        if evaluate is not None:
+            result = evaluate(actor.eval())
+            actor.train()
+            log.evals.append({"step": step, "time": time.perf_counter() - start, **result})
+            if verbose:
+                print(f"  step {step:>5d}  " + "  ".join(f"{k} {v:.3g}" for k, v in result.items()), flush=True)
+
+    run_evaluation(0)
+    for step in range(1, n_steps + 1):
+        chosen, rejected = train.batch(rng.integers(len(train), size=batch_size))
+        loss, info = dpo_loss(actor, reference, chosen, rejected, beta)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        if step % log_every == 0 or step == n_steps:
+            row = {"step": step, "time": time.perf_counter() - start, "loss": float(loss.detach()),
+                   **{k: float(torch.as_tensor(v).detach()) for k, v in info.items()}}
+            if val is not None:
+                with torch.no_grad():
+                    idx = np.arange(min(len(val), 512))
+                    val_loss, val_info = dpo_loss(actor, reference, *val.batch(idx), beta)
+                row.update(val_loss=float(val_loss), **{f"val_{k}": float(v) for k, v in val_info.items()})
+            log.steps.append(row)
+        if step % eval_every == 0 or step == n_steps:
+            run_evaluation(step)
+    return actor.eval(), log

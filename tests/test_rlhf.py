@@ -1,0 +1,98 @@
+"""Tests of rlcourse.rlhf: the reference policy, the reward model fit, pairs, KL, evaluation and the DPO loop."""
+import copy
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from rlcourse.nets import GaussianPolicy
+from rlcourse.preferences import preference_accuracy
+from rlcourse.rlhf import (evaluate_policy, fit_reward_model, load_reference, mean_kl, oriented_pairs,
+                           reward_function, train_dpo)
+
+
+def test_reference_policy_is_verified_and_mid_skill():
+    ref = load_reference()
+    assert isinstance(ref, GaussianPolicy) and not any(p.requires_grad for p in ref.parameters())
+    assert 500 < ref.metadata["return_mean"] < 1500 and ref.metadata["eval_episodes"] == 20
+
+
+def _synthetic_segments(rng, n=300, length=5):
+    obs = rng.normal(size=(n, length, 11)).astype(np.float32)
+    act = rng.uniform(-1, 1, size=(n, length, 3)).astype(np.float32)
+    returns = (obs[..., 0] + act[..., 1]).sum(1)
+    return obs, act, returns
+
+
+def test_fit_reward_model_learns_and_normalises():
+    rng = np.random.default_rng(0)
+    obs, act, returns = _synthetic_segments(rng)
+    pairs = rng.integers(0, 200, size=(1500, 2))
+    mu = (returns[pairs[:, 0]] > returns[pairs[:, 1]]).astype(np.float32)
+    mu[::50] = 0.5
+    ens = fit_reward_model(obs, act, pairs, mu, n_members=2, n_steps=300, seed=0)
+    r = reward_function(ens)
+    per_step = r(obs.reshape(-1, 11), act.reshape(-1, 3))
+    assert per_step.shape == (obs.shape[0] * obs.shape[1],) and per_step.dtype == np.float32
+    seg = per_step.reshape(obs.shape[:2]).sum(1)
+    test = rng.integers(200, 300, size=(500, 2))
+    test_mu = (returns[test[:, 0]] > returns[test[:, 1]]).astype(np.float32)
+    assert preference_accuracy(seg[test[:, 0]], seg[test[:, 1]], test_mu) > 0.9
+    members = ens.predict(obs[np.unique(pairs)], act[np.unique(pairs)]).reshape(2, -1)
+    assert np.allclose(members.mean(1), 0.0, atol=1e-4) and np.allclose(members.std(1), 1.0, atol=1e-2)
+
+
+def test_oriented_pairs_drop_ties_and_put_the_winner_first():
+    obs = np.arange(4, dtype=np.float32)[:, None, None] * np.ones((4, 2, 11), np.float32)
+    act = np.zeros((4, 2, 3), np.float32)
+    pairs = np.array([[0, 1], [2, 3], [1, 2]])
+    sp = oriented_pairs(obs, act, pairs, np.array([1.0, 0.0, 0.5]))
+    assert len(sp) == 2
+    assert sp.chosen_obs[:, 0, 0].tolist() == [0.0, 3.0] and sp.rejected_obs[:, 0, 0].tolist() == [1.0, 2.0]
+    (co, ca), (ro, ra) = sp.batch([1])
+    assert co.shape == (1, 2, 11) and ra.shape == (1, 2, 3)
+
+
+def test_mean_kl_closed_form():
+    pol = GaussianPolicy(11, 3, hidden=(8,), log_std_init=np.log(0.5))
+    ref = copy.deepcopy(pol)
+    obs = np.random.default_rng(0).normal(size=(20, 11))
+    assert abs(mean_kl(pol, ref, obs)) < 1e-7
+    with torch.no_grad():
+        pol.mean.bias.add_(torch.tensor([0.1, -0.2, 0.0]))
+    assert np.isclose(mean_kl(pol, ref, obs), (0.01 + 0.04) / (2 * 0.25), rtol=1e-5)
+
+
+def test_evaluate_policy_reports_return_kl_and_learned_return():
+    ref = load_reference()
+    out = evaluate_policy(ref, ref, reward_fn=lambda o, a: np.ones(len(o), np.float32), n_episodes=2, max_steps=30)
+    assert set(out) == {"return", "return_std", "length", "kl", "learned_return"}
+    assert out["kl"] == 0.0 and np.isclose(out["learned_return"], out["length"])
+
+
+def _dpo(policy, reference, chosen, rejected, beta):
+    lp = lambda p, seg: p.log_prob(*seg).sum(-1)
+    with torch.no_grad():
+        rc, rr = lp(reference, chosen), lp(reference, rejected)
+    m = beta * ((lp(policy, chosen) - rc) - (lp(policy, rejected) - rr))
+    return -F.logsigmoid(m).mean(), {"margin": m.mean().detach(), "accuracy": (m > 0).float().mean()}
+
+
+def test_train_dpo_learns_the_preferences_and_keeps_the_reference():
+    rng = np.random.default_rng(1)
+    n, length = 400, 4
+    obs = rng.normal(size=(2 * n, length, 11)).astype(np.float32)
+    act = rng.uniform(-1, 1, size=(2 * n, length, 3)).astype(np.float32)
+    good = act[..., 0].sum(1)  # the annotator likes a large first action
+    pairs = np.stack([np.arange(n), np.arange(n, 2 * n)], 1)
+    mu = (good[:n] > good[n:]).astype(np.float32)
+    train, val = oriented_pairs(obs, act, pairs[:300], mu[:300]), oriented_pairs(obs, act, pairs[300:], mu[300:])
+    ref = GaussianPolicy(11, 3, hidden=(16,)).requires_grad_(False)
+    before = [p.clone() for p in ref.parameters()]
+    evals = []
+    pol, log = train_dpo(ref, ref, _dpo, train, beta=0.5, n_steps=200, lr=3e-3, val=val, eval_every=100,
+                         evaluate=lambda p: evals.append(1) or {"bias0": float(p.mean.bias[0].detach())}, log_every=50,
+                         verbose=False)
+    assert log.steps[0]["step"] == 50 and log.steps[-1]["val_accuracy"] > 0.8
+    assert len(log.evals) == 3 and log.evals[-1]["bias0"] > log.evals[0]["bias0"]
+    assert all(torch.equal(a, b) for a, b in zip(before, ref.parameters()))
