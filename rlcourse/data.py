@@ -123,7 +123,8 @@ def check_all(root: Path = DATASETS) -> list[str]:
         except DatasetError as err:
             problems.append(str(err))
     shipped = {p.relative_to(root).as_posix() for p in root.rglob("*")
-               if p.is_file() and p.suffix in {".npz", ".pt", ".json", ".npy"} and p.name != MANIFEST_NAME}
+               if p.is_file() and p.suffix in {".npz", ".pt", ".json", ".npy"} and p.name != MANIFEST_NAME
+               and not p.name.startswith("ckpt_")}  # training snapshots (datasets/experts/<env>/<run>/) are not shipped
     for name in sorted(shipped - set(entries)):
         problems.append(f"datasets/{name} is not listed in the MANIFEST: add it with `python -m rlcourse.data add`")
     return problems
