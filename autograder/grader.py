@@ -160,11 +160,11 @@ def _title(item: pytest.Item) -> str:
     return doc[0] if doc else item.name.removeprefix("test_").replace("_", " ")
 
 
-def build_reference(assignment: str) -> dict[str, Any]:
-    """Run the solution notebook's parameters (fast), setup and solution cells in a fresh namespace."""
+def build_reference(assignment: str, parameters: dict[str, Any] = FAST_PARAMETERS) -> dict[str, Any]:
+    """Run the solution notebook's parameters (overridden by ``parameters``), setup and solution cells."""
     namespace: dict[str, Any] = {"__name__": "__reference__"}
     for cell in release_plan(read_notebook(course.solution_notebook(assignment))):
-        source = with_parameters(cell.source, FAST_PARAMETERS) if cell.kind == "parameters" else cell.source
+        source = with_parameters(cell.source, parameters) if cell.kind == "parameters" else cell.source
         with contextlib.redirect_stdout(io.StringIO()):
             exec(compile(source, f"<solution {cell.label}>", "exec"), namespace)
     return namespace

@@ -18,19 +18,17 @@ Results go to ``bench/results/hw4_rlhf_dpo.json``.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-import nbformat
 import numpy as np
 
+from autograder.grader import build_reference
+
 REPO = Path(__file__).resolve().parents[1]
-NOTEBOOK = REPO / "solutions" / "hw4_rlhf_dpo" / "hw4_rlhf_dpo.ipynb"
 RESULTS = REPO / "bench" / "results" / "hw4_rlhf_dpo.json"
 PRECOMPUTED = REPO / "datasets" / "hw4" / "precomputed.json"
 RM_CACHE = Path(os.environ.get("TMPDIR", "/tmp")) / "hw4_bench_reward_models"
@@ -38,14 +36,8 @@ FINAL_EPISODES = 20
 
 
 def solution_namespace() -> dict:
-    """The solution notebook's setup and stub cells, executed with ``FAST = False`` (``HW4_BENCH_FAST=1``: True)."""
-    ns: dict = {"__name__": "__bench__", "FAST": os.environ.get("HW4_BENCH_FAST") == "1"}
-    for cell in nbformat.read(NOTEBOOK, as_version=4).cells:
-        meta = cell.metadata
-        if cell.cell_type == "code" and ("setup" in meta.get("tags", []) or meta.get("nbgrader", {}).get("solution")):
-            with contextlib.redirect_stdout(io.StringIO()):
-                exec(compile(cell.source, f"<{meta.get('nbgrader', {}).get('grade_id')}>", "exec"), ns)
-    return ns
+    """The solution notebook's parameters, setup and stub cells, run in a fresh namespace."""
+    return build_reference("hw4_rlhf_dpo", {"FAST": os.environ.get("HW4_BENCH_FAST") == "1"})
 
 
 def _final(ns: dict, policy, reference, reward_fn=None) -> dict:

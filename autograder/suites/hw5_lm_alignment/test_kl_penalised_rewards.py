@@ -5,18 +5,6 @@ import torch
 from autograder.suite import check_array, stub
 
 
-def batch(rng: np.random.Generator, b: int = 4, t: int = 9, v: int = 11, scale: float = 2.0):
-    """Random logits (B, T, V) float64, tokens (B, T) int64, and a prompt-then-completion mask with ragged ends."""
-    logits = torch.as_tensor(rng.normal(scale=scale, size=(b, t, v)))
-    tokens = torch.as_tensor(rng.integers(0, v, size=(b, t)))
-    start = rng.integers(1, 4, size=b)
-    end = np.minimum(start + rng.integers(1, t, size=b), t)
-    end[0] = t                                             # one completion runs to the last column
-    pos = np.arange(t)[None]
-    mask = torch.as_tensor(((pos >= start[:, None]) & (pos < end[:, None])).astype(np.float64))
-    return logits, tokens, mask
-
-
 HINT = ("rewards = -beta * (logp - logp_ref) on masked tokens, 0 elsewhere, plus score[b] at the LAST position "
         "where mask[b] is 1 (which may be the last column).")
 
@@ -28,8 +16,8 @@ def _by_hand(score, logp, logp_ref, mask, beta):
     return out
 
 
-def _call(student, rng, beta, bool_mask=False):
-    _, _, mask = batch(rng, b=5, t=8)
+def _call(student, rng, ragged_batch, beta, bool_mask=False):
+    _, _, mask = ragged_batch(rng, b=5, t=8)
     logp, logp_ref = -rng.exponential(size=(5, 8)), -rng.exponential(size=(5, 8))   # junk outside the mask too
     score = rng.normal(size=5)
     got = student.kl_penalised_rewards(torch.as_tensor(score), torch.as_tensor(logp), torch.as_tensor(logp_ref),
@@ -39,24 +27,24 @@ def _call(student, rng, beta, bool_mask=False):
 
 
 @stub("kl_penalised_rewards", points=2, hint=HINT)
-def test_by_hand_ragged_rows(student, rng):
+def test_by_hand_ragged_rows(student, rng, ragged_batch):
     """Five rows of different lengths (one running to the last column), beta = 0.3"""
-    got, want = _call(student, rng, 0.3)
+    got, want = _call(student, rng, ragged_batch, 0.3)
     check_array(got, want, rtol=1e-6, atol=1e-9)
 
 
 @stub("kl_penalised_rewards", points=1, hint="The KL term is -beta * (logp - logp_ref): a policy above the reference pays.")
-def test_sign_and_beta(student, rng):
+def test_sign_and_beta(student, rng, ragged_batch):
     """beta = 0 leaves only the score on the last token; beta = 2 scales the penalty"""
     for beta in (0.0, 2.0):
-        got, want = _call(student, rng, beta)
+        got, want = _call(student, rng, ragged_batch, beta)
         check_array(got, want, rtol=1e-6, atol=1e-9, name=f"the rewards for beta = {beta}")
 
 
 @stub("kl_penalised_rewards", points=1, hint=HINT)
-def test_boolean_mask_and_zeros_outside(student, rng):
+def test_boolean_mask_and_zeros_outside(student, rng, ragged_batch):
     """A boolean mask works the same, and every entry outside the mask is exactly zero"""
-    got, want = _call(student, rng, 0.5, bool_mask=True)
+    got, want = _call(student, rng, ragged_batch, 0.5, bool_mask=True)
     check_array(got, want, rtol=1e-6, atol=1e-9)
 
 

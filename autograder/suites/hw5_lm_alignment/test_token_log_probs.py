@@ -5,18 +5,6 @@ import torch
 from autograder.suite import check_array, check_tensor, stub
 
 
-def batch(rng: np.random.Generator, b: int = 4, t: int = 9, v: int = 11, scale: float = 2.0):
-    """Random logits (B, T, V) float64, tokens (B, T) int64, and a prompt-then-completion mask with ragged ends."""
-    logits = torch.as_tensor(rng.normal(scale=scale, size=(b, t, v)))
-    tokens = torch.as_tensor(rng.integers(0, v, size=(b, t)))
-    start = rng.integers(1, 4, size=b)
-    end = np.minimum(start + rng.integers(1, t, size=b), t)
-    end[0] = t                                             # one completion runs to the last column
-    pos = np.arange(t)[None]
-    mask = torch.as_tensor(((pos >= start[:, None]) & (pos < end[:, None])).astype(np.float64))
-    return logits, tokens, mask
-
-
 def direct_token_log_probs(logits: torch.Tensor, tokens: torch.Tensor, mask: torch.Tensor) -> np.ndarray:
     """The definition, one entry at a time (no vectorisation to share a bug with)."""
     b, t, _ = logits.shape
@@ -39,17 +27,17 @@ def _as_np(x, name="the result"):
 
 
 @stub("token_log_probs", points=2, hint=HINT)
-def test_matches_direct_gather(student, rng):
+def test_matches_direct_gather(student, rng, ragged_batch):
     """Random logits and ragged masks: every entry equals the log-softmax picked out directly"""
-    logits, tokens, mask = batch(rng)
+    logits, tokens, mask = ragged_batch(rng)
     got = student.token_log_probs(logits, tokens, mask)
     check_array(_as_np(got), direct_token_log_probs(logits, tokens, mask), rtol=1e-5, atol=1e-6)
 
 
 @stub("token_log_probs", points=2, hint=HINT)
-def test_padding_changes_nothing(student, rng):
+def test_padding_changes_nothing(student, rng, ragged_batch):
     """Garbage logits and tokens on masked positions (prompt and padding) leave the result unchanged"""
-    logits, tokens, mask = batch(rng)
+    logits, tokens, mask = ragged_batch(rng)
     base = _as_np(student.token_log_probs(logits, tokens, mask))
     junk_logits, junk_tokens = logits.clone(), tokens.clone()
     predicts_masked = torch.cat([mask[:, 1:], torch.zeros(len(mask), 1, dtype=mask.dtype)], 1) == 0
@@ -61,17 +49,17 @@ def test_padding_changes_nothing(student, rng):
 
 
 @stub("token_log_probs", points=1, hint=HINT)
-def test_bool_mask_and_extreme_logits(student, rng):
+def test_bool_mask_and_extreme_logits(student, rng, ragged_batch):
     """A boolean mask, and logits of size 1e3 (log(softmax) underflows to -inf; log_softmax does not)"""
-    logits, tokens, mask = batch(rng, scale=1e3)
+    logits, tokens, mask = ragged_batch(rng, scale=1e3)
     got = student.token_log_probs(logits, tokens, mask.bool())
     check_array(_as_np(got), direct_token_log_probs(logits, tokens, mask), rtol=1e-5, atol=1e-6)
 
 
 @stub("token_log_probs", points=1, hint="Keep everything in torch so gradients flow back to the logits.")
-def test_gradient_flows_to_logits(student, reference, rng):
+def test_gradient_flows_to_logits(student, reference, rng, ragged_batch):
     """The gradient of the summed result with respect to the logits matches the definition's"""
-    logits, tokens, mask = batch(rng, b=3, t=6, v=5)
+    logits, tokens, mask = ragged_batch(rng, b=3, t=6, v=5)
     expr = "torch.autograd.grad(token_log_probs(x, tokens, mask).sum(), x)[0]"
     kw = dict(tokens=tokens, mask=mask)
     got = student.eval(f"(lambda x: {expr})(logits.clone().requires_grad_())", logits=logits, **kw)
@@ -80,17 +68,17 @@ def test_gradient_flows_to_logits(student, reference, rng):
 
 
 @stub("sequence_log_prob", points=2, hint=SEQ_HINT)
-def test_sequence_log_prob_is_masked_sum(student, rng):
+def test_sequence_log_prob_is_masked_sum(student, rng, ragged_batch):
     """One number per sequence: the masked sum of the direct token log-probabilities"""
-    logits, tokens, mask = batch(rng, b=5)
+    logits, tokens, mask = ragged_batch(rng, b=5)
     got = student.sequence_log_prob(logits, tokens, mask)
     check_array(_as_np(got), direct_token_log_probs(logits, tokens, mask).sum(1), rtol=1e-5, atol=1e-6)
 
 
 @stub("sequence_log_prob", points=1, hint=SEQ_HINT)
-def test_sequence_log_prob_ignores_padding(student, rng):
+def test_sequence_log_prob_ignores_padding(student, rng, ragged_batch):
     """Appending padded columns (with any logits) to every sequence changes nothing"""
-    logits, tokens, mask = batch(rng, b=3)
+    logits, tokens, mask = ragged_batch(rng, b=3)
     base = _as_np(student.sequence_log_prob(logits, tokens, mask))
     longer = student.sequence_log_prob(torch.cat([logits, torch.as_tensor(rng.normal(scale=50, size=(3, 4, logits.shape[-1])))], 1),
                                        torch.cat([tokens, torch.zeros(3, 4, dtype=tokens.dtype)], 1),
