@@ -6,14 +6,14 @@ plus the KL-coefficient and beta sweeps that the notebook plots as precomputed. 
     python bench/bench_hw4_rlhf_dpo.py --record        # also refresh datasets/hw4/precomputed.json + MANIFEST
 
 Every run uses the solution notebook's own stubs (``solutions/hw4_rlhf_dpo``) and its budgets with
-``FAST = False``: PPO for ``PPO_STEPS`` environment steps, the reward model for ``RM_STEPS`` Adam steps
-per member, DPO for ``DPO_STEPS`` steps. Final returns are deterministic (mean action) over 20 seeded
+``FAST = False``: PPO for ``PPO_STEPS`` environment steps, DPO for ``DPO_STEPS`` steps. Every RLHF run
+uses the shipped reward model (``datasets/hw4/reward_model.pt``), so RLHF's seeds vary PPO only, and
+its wall time includes the model's recorded fit time. Final returns are deterministic (mean action) over 20 seeded
 episodes (seed 1000, like the reference's recorded return); KL is the per-step
 KL(pi || pi_ref) on the states those episodes visit. Wall times are per run, measured with ``--workers``
 runs at a time on a shared 2-core machine, so they include contention: compare them with each other,
 not with a solo run; the CPU seconds each run used (``cpu`` in the results, single-threaded torch) are
-what a solo run on an idle core would take, roughly. RLHF's times include fitting its reward model.
-Results go to ``bench/results/hw4_rlhf_dpo.json``.
+what a solo run on an idle core would take, roughly. Results go to ``bench/results/hw4_rlhf_dpo.json``.
 """
 from __future__ import annotations
 
@@ -31,7 +31,6 @@ from autograder.grader import build_reference
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "bench" / "results" / "hw4_rlhf_dpo.json"
 PRECOMPUTED = REPO / "datasets" / "hw4" / "precomputed.json"
-RM_CACHE = Path(os.environ.get("TMPDIR", "/tmp")) / "hw4_bench_reward_models"
 FINAL_EPISODES = 20
 
 
@@ -54,32 +53,15 @@ def job(kind: str, seed: int, value: float, steps: int | None) -> dict:
     ns["seed_everything"](seed)
     reference, prefs = ns["load_reference"](), ns["load_hopper_preferences"]()
     ppo_steps = steps or ns["PPO_STEPS"]
-    cache = RM_CACHE / f"seed{seed}_{ns['RM_STEPS']}.pt"
     out: dict = {"kind": kind, "seed": seed, "value": value}
     cpu0 = time.process_time()
-
-    def reward_model():
-        from rlcourse.preferences import RewardEnsemble
-
-        ens = RewardEnsemble(11, 3, seed=seed)
-        blob = torch.load(cache, weights_only=True)
-        ens.load_state_dict(blob["state_dict"])
-        return ens.eval(), float(blob["wall"])
-
-    if kind == "reward_model":
-        if cache.exists():  # fitted by an earlier (interrupted) run of this script: reuse it and its fit time
-            ens, wall = reward_model()
-        else:
-            t0 = time.perf_counter()
-            ens = ns["fit_reward_model"](prefs.obs, prefs.act, prefs.train_pairs, prefs.train_mu,
-                                         n_steps=ns["RM_STEPS"], seed=seed)
-            wall = time.perf_counter() - t0
-            RM_CACHE.mkdir(parents=True, exist_ok=True)
-            torch.save({"state_dict": ens.state_dict(), "wall": torch.tensor(wall)}, cache)
-        seg = ns["reward_function"](ens)(prefs.obs.reshape(-1, 11), prefs.act.reshape(-1, 3)).reshape(prefs.obs.shape[:2]).sum(1)
+    reward_model = ns["load_reward_model"]()
+    rf = ns["reward_function"](reward_model)
+    if kind == "reward_model":  # the shipped model, measured here on the held-out pairs
+        seg = rf(prefs.obs.reshape(-1, 11), prefs.act.reshape(-1, 3)).reshape(prefs.obs.shape[:2]).sum(1)
         i, j = prefs.test_pairs.T
-        out.update(wall=wall, test_accuracy=ns["preference_accuracy"](seg[i], seg[j], prefs.test_mu),
-                   ceiling=prefs.info["bayes_ceiling_test"])
+        out.update(wall=reward_model.metadata["fit_seconds"], ceiling=prefs.info["bayes_ceiling_test"],
+                   test_accuracy=ns["preference_accuracy"](seg[i], seg[j], prefs.test_mu))
         return out
 
     cfg = lambda **kw: ns["PPOConfig"](total_steps=ppo_steps, n_steps=ns["PPO_ENV_STEPS_PER_ROLLOUT"], seed=seed,
@@ -92,10 +74,11 @@ def job(kind: str, seed: int, value: float, steps: int | None) -> dict:
         out["wall"] = time.perf_counter() - t0
         out["final"] = _final(ns, policy, reference)
     elif kind == "rlhf":
-        ens, rm_wall = reward_model()
-        rf = ns["reward_function"](ens)
-        steps_r = rf(prefs.obs.reshape(-1, 11), prefs.act.reshape(-1, 3))
-        wrap = lambda envs: ns["LearnedRewardWrapper"](envs, rf, float(steps_r.mean()), float(steps_r.std()), 1.0)
+        rm_wall = reward_model.metadata["fit_seconds"]
+        meta = reward_model.metadata
+        offset = float(os.environ.get("HW4_BENCH_OFFSET", ns["REWARD_OFFSET"]))
+        wrap = lambda envs: ns["LearnedRewardWrapper"](envs, rf, meta["step_mean"], meta["step_std"], offset)
+        out["offset"] = offset
         t0 = time.perf_counter()
         policy, log = ns["ppo"](reference, reference, ns["compute_gae"], ns["ppo_loss"], cfg(kl_coef=value), wrap=wrap,
                                 evaluate=curve_eval(rf), verbose=False)
@@ -183,9 +166,9 @@ def print_tables(summary: dict, rms: list[dict]) -> None:
               f"{100 * row['return_mean'] / ceiling:.0f}% | {row['kl_mean']:.3f} | {row['wall_mean']:.0f} | "
               f"{row.get('cpu_mean', float('nan')):.0f} |")
     if rms:
-        acc = [r["test_accuracy"] for r in rms]
-        print(f"\nReward models: held-out accuracy {np.mean(acc):.3f} ± {np.std(acc):.3f} over {len(acc)} seeds "
-              f"(annotator's own rule: {rms[0]['ceiling']:.3f}); fit time {np.mean([r['wall'] for r in rms]):.0f} s.")
+        rm = rms[0]
+        print(f"\nReward model (datasets/hw4/reward_model.pt): held-out accuracy {rm['test_accuracy']:.3f} "
+              f"(annotator's own rule: {rm['ceiling']:.3f}); recorded fit time {rm['wall']:.0f} s.")
     print("\n### Return–KL frontier (seed 0 unless noted)\n")
     print("| method | parameter | seeds | true return | KL (nats/step) |")
     print("|---|---|---:|---:|---:|")
@@ -205,6 +188,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--beta", type=float, default=0.1, help="DPO's beta in the table")
     p.add_argument("--kl-sweep", type=float, nargs="*", default=[0.0, 0.01, 0.03, 0.3])
     p.add_argument("--beta-sweep", type=float, nargs="*", default=[0.03, 0.3, 1.0])
+    p.add_argument("--offset", type=float, default=None, help="the learned reward's per-step offset b "
+                   "(default: the notebook's REWARD_OFFSET)")
     p.add_argument("--no-sweep", action="store_true")
     p.add_argument("--workers", type=int, default=2, help="runs at a time (wall times grow when they share cores)")
     p.add_argument("--record", action="store_true", help="write datasets/hw4/precomputed.json and record it")
@@ -212,6 +197,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--tables-only", action="store_true", help="reprint (and with --record, re-record) the tables "
                    "from bench/results/hw4_rlhf_dpo.json without running anything")
     args = p.parse_args(argv)
+    if args.offset is not None:
+        os.environ["HW4_BENCH_OFFSET"] = str(args.offset)
     if args.smoke:
         os.environ["HW4_BENCH_FAST"] = "1"
         global RESULTS, FINAL_EPISODES
@@ -230,8 +217,7 @@ def main(argv: list[str] | None = None) -> None:
             _record(summary, saved["args"])
         return
     start = time.perf_counter()
-    print(f"reward models for seeds {args.seeds}", flush=True)
-    rms = run_all([("reward_model", s, 0.0, None) for s in args.seeds], args.workers)
+    rms = [job("reward_model", args.seeds[0], 0.0, None)]
     jobs = [(kind, s, v, steps) for s in args.seeds for kind, v in (("ppo", 0.0), ("rlhf", args.kl), ("dpo", args.beta))]
     if not args.no_sweep:
         jobs += [("rlhf", 0, v, steps) for v in args.kl_sweep if v != args.kl]

@@ -259,7 +259,7 @@ class RewardEnsemble(nn.Module):
         with torch.random.fork_rng():
             torch.manual_seed(seed)
             self.members = nn.ModuleList(mlp([obs_dim + act_dim, *hidden, 1], "relu") for _ in range(n_members))
-        self.obs_dim, self.act_dim, self.n_members = obs_dim, act_dim, n_members
+        self.obs_dim, self.act_dim, self.n_members, self.hidden = obs_dim, act_dim, n_members, list(hidden)
         self.register_buffer("in_mean", torch.zeros(obs_dim + act_dim))
         self.register_buffer("in_std", torch.ones(obs_dim + act_dim))
         self.register_buffer("out_mean", torch.zeros(n_members))

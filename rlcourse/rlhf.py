@@ -2,8 +2,9 @@
 
 * :func:`load_reference` — the reference ("SFT") policy, cloned from a mid-skill checkpoint
   (``datasets/hw4/reference_policy.pt``, made by ``datasets/scripts/make_reference_policy.py``).
-* :func:`fit_reward_model` — the Bradley–Terry reward ensemble of hw3, trained on labelled segment
-  pairs (hw3 asks students to write it; hw4 takes it as given), and :func:`reward_function`, its
+* :func:`load_reward_model` — the Bradley–Terry reward ensemble fitted to hw3's pairs
+  (``datasets/hw4/reward_model.pt``, made by ``datasets/scripts/make_hw4_reward_model.py``: hw3 asks
+  students to write that fit, so it is not in this library), and :func:`reward_function`, its
   batched numpy form for an environment wrapper.
 * :func:`oriented_pairs` — labelled pairs turned into (chosen, rejected) segment tensors, ties left out.
 * :func:`evaluate_policy` — deterministic true return, the KL to the reference on the visited states,
@@ -15,6 +16,7 @@ from __future__ import annotations
 import copy
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
@@ -28,6 +30,7 @@ from rlcourse.rollouts import rollout
 
 ENV_ID = "Hopper-v5"
 REFERENCE_FILE = "hw4/reference_policy.pt"
+REWARD_MODEL_FILE = "hw4/reward_model.pt"
 EVAL_SEED = 1000
 
 
@@ -36,39 +39,27 @@ def load_reference() -> GaussianPolicy:
     return _data.load_policy(REFERENCE_FILE).requires_grad_(False)
 
 
-# --------------------------------------------------------------------------- reward model (hw3)
-def _segment_bt_loss(member, obs_a, act_a, obs_b, act_b, mu) -> torch.Tensor:
-    d = member(obs_a, act_a).sum(-1) - member(obs_b, act_b).sum(-1)
-    return -(mu * torch.nn.functional.logsigmoid(d) + (1 - mu) * torch.nn.functional.logsigmoid(-d)).mean()
+# --------------------------------------------------------------------------- the learned reward
+def save_reward_model(ensemble: RewardEnsemble, path: str | Path, **metadata: float | int | str) -> None:
+    """Save a reward ensemble as ``{"config", "state_dict", "metadata"}``: tensors and plain values only."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    config = {"obs_dim": ensemble.obs_dim, "act_dim": ensemble.act_dim, "n_members": ensemble.n_members,
+              "hidden": ensemble.hidden}
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save({"config": config, "state_dict": ensemble.state_dict(), "metadata": metadata}, tmp)
+    tmp.replace(path)
 
 
-def fit_reward_model(obs: np.ndarray, act: np.ndarray, pairs: np.ndarray, mu: np.ndarray, n_members: int = 3,
-                     n_steps: int = 1500, batch_size: int = 64, lr: float = 1e-3, weight_decay: float = 1e-4,
-                     seed: int = 0) -> RewardEnsemble:
-    """A reward ensemble fitted by the Bradley–Terry loss on segment pairs (each member on a bootstrap).
-
-    ``obs`` ``(N, L, 11)``, ``act`` ``(N, L, 3)``: all segments; ``pairs`` ``(M, 2)`` indices into them,
-    ``mu`` ``(M,)`` labels (1: first preferred, 0: second, 0.5: tie, counted as half a win each).
-    Each member's per-step output is normalised to mean 0 and standard deviation 1 on the segments
-    used, so a step of a typical data segment earns about 0.
-    """
-    obs_t, act_t = torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(act, dtype=torch.float32)
-    pairs, mu_t = np.asarray(pairs), torch.as_tensor(np.asarray(mu), dtype=torch.float32)
-    used = np.unique(pairs)
-    ensemble = RewardEnsemble(obs_t.shape[-1], act_t.shape[-1], n_members, seed=seed)
-    ensemble.set_input_scaling(obs_t[used], act_t[used])
-    rng = np.random.default_rng(seed)
-    for k in range(n_members):
-        member, boot = ensemble.member(k), rng.integers(len(pairs), size=len(pairs))
-        opt = torch.optim.Adam(member.parameters(), lr=lr, weight_decay=weight_decay)
-        for _ in range(n_steps):
-            batch = boot[rng.integers(len(boot), size=batch_size)]
-            a, b = pairs[batch, 0], pairs[batch, 1]
-            loss = _segment_bt_loss(member, obs_t[a], act_t[a], obs_t[b], act_t[b], mu_t[batch])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-    return ensemble.normalise_(obs_t[used], act_t[used]).eval()
+def load_reward_model(name: str = REWARD_MODEL_FILE) -> RewardEnsemble:
+    """The shipped reward ensemble (made by ``datasets/scripts/make_hw4_reward_model.py`` from hw3's pairs),
+    in eval mode; ``.metadata`` holds its held-out accuracy, the mean and standard deviation of its
+    per-step reward on the preference data (``step_mean``, ``step_std``) and its fit time."""
+    blob = torch.load(_data.verify(name), map_location="cpu", weights_only=True)
+    ensemble = RewardEnsemble(**blob["config"])
+    ensemble.load_state_dict(blob["state_dict"])
+    ensemble.metadata = dict(blob["metadata"])
+    return ensemble.eval().requires_grad_(False)
 
 
 def reward_function(ensemble: RewardEnsemble) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:

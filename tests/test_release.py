@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import sysconfig
@@ -30,9 +31,11 @@ def test_student_notebooks_carry_no_solutions_markers_or_outputs():
 
 def test_leak_detection_catches_markers_outputs_and_instructor_folders(tmp_path):
     (tmp_path / "solutions").mkdir()
+    (tmp_path / "datasets" / "scripts").mkdir(parents=True)
     (tmp_path / "a.py").write_text("### BEGIN SOLUTION\n")
     problems = find_leaks(tmp_path)
     assert any("solutions/" in p for p in problems) and any("a.py" in p for p in problems)
+    assert any("datasets/scripts/" in p for p in problems)
 
 
 def test_student_release_is_clean_and_hw0_runs_there(tmp_path):
@@ -42,6 +45,12 @@ def test_student_release_is_clean_and_hw0_runs_there(tmp_path):
     assert not (out / "solutions").exists() and not (out / "autograder").exists()
     assert not list(out.rglob("test_*.py")) and not list(out.rglob("expected.json"))
     assert find_leaks(out) == []
+    assert (out / "datasets" / "MANIFEST.json").exists() and not (out / "datasets" / "scripts").exists()
+    # No released library code defines a function or class named like a stub of any assignment.
+    stubs = {name for assignment in course.assignment_ids() for name in course.stub_names(assignment)}
+    for path in out.rglob("*.py"):
+        defined = set(re.findall(r"^\s*(?:def|class)\s+(\w+)", path.read_text(), flags=re.M))
+        assert not defined & stubs, f"{path.relative_to(out)} defines {sorted(defined & stubs)}, which students write"
     assert "autograder*" not in (out / "pyproject.toml").read_text()  # the package list is rlcourse only
     # A Python that sees the installed stack but not this repository's editable rlcourse, so that the
     # release's own copy is the one a student's notebook imports.

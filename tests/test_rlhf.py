@@ -1,14 +1,25 @@
-"""Tests of rlcourse.rlhf: the reference policy, the reward model fit, pairs, KL, evaluation and the DPO loop."""
+"""Tests of rlcourse.rlhf (the reference policy, the shipped reward model, pairs, KL, evaluation and the DPO
+loop) and of the instructor script that fits the reward model."""
 import copy
+import importlib.util
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from rlcourse.nets import GaussianPolicy
-from rlcourse.preferences import preference_accuracy
-from rlcourse.rlhf import (evaluate_policy, fit_reward_model, load_reference, mean_kl, oriented_pairs,
-                           reward_function, train_dpo)
+from rlcourse.preferences import RewardEnsemble, load_hopper_preferences, preference_accuracy
+from rlcourse.rlhf import (evaluate_policy, load_reference, load_reward_model, mean_kl, oriented_pairs,
+                           reward_function, save_reward_model, train_dpo)
+from conftest import REPO
+
+
+def _reward_model_script():
+    path = REPO / "datasets" / "scripts" / "make_hw4_reward_model.py"
+    spec = importlib.util.spec_from_file_location("make_hw4_reward_model", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_reference_policy_is_verified_and_mid_skill():
@@ -24,13 +35,14 @@ def _synthetic_segments(rng, n=300, length=5):
     return obs, act, returns
 
 
-def test_fit_reward_model_learns_and_normalises():
+def test_reward_model_script_fit_learns_and_normalises():
     rng = np.random.default_rng(0)
     obs, act, returns = _synthetic_segments(rng)
     pairs = rng.integers(0, 200, size=(1500, 2))
     mu = (returns[pairs[:, 0]] > returns[pairs[:, 1]]).astype(np.float32)
     mu[::50] = 0.5
-    ens = fit_reward_model(obs, act, pairs, mu, n_members=2, n_steps=300, seed=0)
+    ens = _reward_model_script().fit(obs, act, pairs, mu, n_members=2, hidden=[64, 64], n_steps=300, batch_size=64,
+                                     lr=1e-3, weight_decay=1e-4, seed=0)
     r = reward_function(ens)
     per_step = r(obs.reshape(-1, 11), act.reshape(-1, 3))
     assert per_step.shape == (obs.shape[0] * obs.shape[1],) and per_step.dtype == np.float32
@@ -40,6 +52,43 @@ def test_fit_reward_model_learns_and_normalises():
     assert preference_accuracy(seg[test[:, 0]], seg[test[:, 1]], test_mu) > 0.9
     members = ens.predict(obs[np.unique(pairs)], act[np.unique(pairs)]).reshape(2, -1)
     assert np.allclose(members.mean(1), 0.0, atol=1e-4) and np.allclose(members.std(1), 1.0, atol=1e-2)
+
+
+def test_segment_bt_loss_is_log2_at_equal_rewards_and_follows_the_label():
+    bt = _reward_model_script().segment_bt_loss
+    member = lambda obs, act: obs[..., 0]
+    a, b = torch.zeros(4, 3, 11), torch.zeros(4, 3, 11)
+    b[..., 0] = 1.0  # R_b - R_a = 3 per pair
+    u = torch.zeros(4, 3, 3)
+    assert torch.isclose(bt(member, a, u, a, u, torch.full((4,), 0.7)), torch.tensor(np.log(2), dtype=torch.float32))
+    assert torch.isclose(bt(member, a, u, b, u, torch.zeros(4)), F.softplus(torch.tensor(-3.0)))
+    assert torch.isclose(bt(member, a, u, b, u, torch.full((4,), 0.5)),
+                         0.5 * (F.softplus(torch.tensor(3.0)) + F.softplus(torch.tensor(-3.0))))
+
+
+def test_shipped_reward_model_is_verified_and_near_the_annotator():
+    model = load_reward_model()
+    meta = model.metadata
+    assert isinstance(model, RewardEnsemble) and not any(p.requires_grad for p in model.parameters())
+    prefs = load_hopper_preferences()
+    seg = reward_function(model)(prefs.obs.reshape(-1, 11), prefs.act.reshape(-1, 3)).reshape(prefs.obs.shape[:2])
+    i, j = prefs.test_pairs.T
+    accuracy = preference_accuracy(seg.sum(1)[i], seg.sum(1)[j], prefs.test_mu)
+    assert abs(accuracy - meta["test_accuracy"]) < 1e-3 and accuracy > meta["bayes_ceiling_test"] - 0.03
+    assert abs(seg.mean() - meta["step_mean"]) < 1e-3 and abs(seg.std() - meta["step_std"]) < 1e-3
+
+
+def test_reward_model_save_and_load_round_trip(tmp_path, monkeypatch):
+    import rlcourse.rlhf as rlhf
+
+    ens = RewardEnsemble(11, 3, n_members=2, hidden=(16,), seed=3)
+    x, u = torch.randn(7, 11), torch.randn(7, 3)
+    ens.set_input_scaling(x, u)
+    ens.normalise_(x, u)
+    save_reward_model(ens, tmp_path / "rm.pt", note="test")
+    monkeypatch.setattr(rlhf._data, "verify", lambda name: tmp_path / name)
+    back = load_reward_model("rm.pt")
+    assert back.hidden == [16] and back.metadata == {"note": "test"} and torch.equal(back(x, u), ens(x, u))
 
 
 def test_oriented_pairs_drop_ties_and_put_the_winner_first():

@@ -1,6 +1,6 @@
 """Pretrain the tiny review model of ``hw5_lm_alignment`` on the grammar's corpus (the "SFT" model).
 
-    python datasets/scripts/pretrain_lm.py                 # about 6 minutes on one core; resumes
+    python datasets/scripts/pretrain_lm.py                 # about 2 minutes on an idle core; resumes
     python datasets/scripts/pretrain_lm.py --steps 200 --out /tmp/lm   # a quick smoke run
 
 Samples a corpus from ``rlcourse.reviews`` (seeded), trains ``rlcourse.lm.TinyLM`` by next-token
