@@ -43,9 +43,10 @@ def _final(ns: dict, policy, reference, reward_fn=None) -> dict:
     return ns["evaluate_policy"](policy, reference, reward_fn, n_episodes=FINAL_EPISODES)
 
 
-def job(kind: str, seed: int, value: float, steps: int | None) -> dict:
+def job(kind: str, seed: int, value: float, steps: int | None, offset: float | None = None) -> dict:
     """One run in a fresh worker: ``kind`` in {reward_model, ppo, rlhf, dpo}; ``value`` is the KL
-    coefficient (rlhf) or beta (dpo)."""
+    coefficient (rlhf) or beta (dpo); ``offset`` is the learned reward's per-step offset b (rlhf;
+    default: the notebook's ``REWARD_OFFSET``)."""
     import torch
 
     ns = solution_namespace()
@@ -53,7 +54,7 @@ def job(kind: str, seed: int, value: float, steps: int | None) -> dict:
     ns["seed_everything"](seed)
     reference, prefs = ns["load_reference"](), ns["load_hopper_preferences"]()
     ppo_steps = steps or ns["PPO_STEPS"]
-    out: dict = {"kind": kind, "seed": seed, "value": value}
+    out: dict = {"kind": kind, "seed": seed, "value": value, "steps": ppo_steps}
     cpu0 = time.process_time()
     reward_model = ns["load_reward_model"]()
     rf = ns["reward_function"](reward_model)
@@ -76,7 +77,7 @@ def job(kind: str, seed: int, value: float, steps: int | None) -> dict:
     elif kind == "rlhf":
         rm_wall = reward_model.metadata["fit_seconds"]
         meta = reward_model.metadata
-        offset = float(os.environ.get("HW4_BENCH_OFFSET", ns["REWARD_OFFSET"]))
+        offset = ns["REWARD_OFFSET"] if offset is None else offset
         wrap = lambda envs: ns["LearnedRewardWrapper"](envs, rf, meta["step_mean"], meta["step_std"], offset)
         out["offset"] = offset
         t0 = time.perf_counter()
@@ -103,11 +104,21 @@ def job(kind: str, seed: int, value: float, steps: int | None) -> dict:
     return out
 
 
-def run_all(jobs: list[tuple], workers: int, partial: Path | None = None) -> list[dict]:
-    """Run ``jobs`` in ``workers`` processes; with ``partial``, rewrite that file after every finished job."""
+def _resumable(partial: Path, steps: int, offset: float) -> list[dict]:
+    """Finished runs of an interrupted earlier invocation with the same budget (none if it differs)."""
+    if not partial.exists():
+        return []
+    runs = json.loads(partial.read_text())
+    runs = [r for r in runs if r.get("steps") == steps and (r["kind"] != "rlhf" or "offset" in r)]
+    return runs
+
+
+def run_all(jobs: list[tuple], workers: int, partial: Path | None = None, done: list[dict] | None = None) -> list[dict]:
+    """Run ``jobs`` in ``workers`` processes; with ``partial``, rewrite that file (``done`` + the new results)
+    after every finished job, so that an interrupted benchmark resumes where it stopped."""
     with ProcessPoolExecutor(workers) as pool:
         futures = {pool.submit(job, *j): j for j in jobs}
-        results = []
+        results = list(done or [])
         for f in as_completed(futures):
             j, r = futures[f], f.result()
             fin = r.get("final", {})
@@ -119,9 +130,11 @@ def run_all(jobs: list[tuple], workers: int, partial: Path | None = None) -> lis
     return results
 
 
-def summarise(results: list[dict], ref_eval: dict, kl_main: float, beta_main: float, steps: int, dpo_steps: int) -> dict:
-    def pick(kind, value=None):
-        return [r for r in results if r["kind"] == kind and (value is None or r["value"] == value)]
+def summarise(results: list[dict], ref_eval: dict, kl_main: float, beta_main: float, offset_main: float, steps: int,
+              dpo_steps: int) -> dict:
+    def pick(kind, value=None, offset=offset_main):
+        return [r for r in results if r["kind"] == kind and (value is None or r["value"] == value)
+                and r.get("offset", offset_main) == offset]
     rows = [{"method": "reference", "returns": [ref_eval["return"]], "kls": [0.0], "walls": [0.0]}]
     for method, kind, value in (("PPO, true reward", "ppo", 0.0), (f"RLHF (KL {kl_main:g})", "rlhf", kl_main),
                                 (f"DPO (beta {beta_main:g})", "dpo", beta_main)):
@@ -143,13 +156,24 @@ def summarise(results: list[dict], ref_eval: dict, kl_main: float, beta_main: fl
                                    "return": float(np.mean([r["final"]["return"] for r in rs])),
                                    "kl": float(np.mean([r["final"]["kl"] for r in rs]))})
     over = {}
-    for label, value in (("RLHF, no KL", 0.0), (f"RLHF, KL {kl_main:g}", kl_main)):
-        rs = [r for r in pick("rlhf", value) if r["seed"] == 0]
+    low = min((r["offset"] for r in results if r["kind"] == "rlhf" and "offset" in r), default=offset_main)
+    for label, value, b in ((f"b = {offset_main:g}, KL {kl_main:g}", kl_main, offset_main),
+                            (f"b = {offset_main:g}, no KL", 0.0, offset_main), (f"b = {low:g}, no KL", 0.0, low)):
+        rs = [r for r in pick("rlhf", value, offset=b) if r["seed"] == 0]
+        if rs and label not in over:
+            over[label] = {k: [e[k] for e in rs[0]["curve"]] for k in ("step", "return", "learned_return", "kl", "length")}
+    offsets = []
+    for b in sorted({r.get("offset", offset_main) for r in results if r["kind"] == "rlhf"}):
+        rs = [r for r in pick("rlhf", kl_main, offset=b) if r["seed"] == 0]
         if rs:
-            over[label] = {k: [e[k] for e in rs[0]["curve"]] for k in ("step", "return", "learned_return", "kl")}
+            fin = rs[0]["final"]
+            offsets.append({"offset": b, "kl_coef": kl_main, "return": fin["return"], "kl": fin["kl"],
+                            "length": fin["length"], "learned_return": fin.get("learned_return")})
     budget = (f"{steps:,} PPO environment steps per run, {dpo_steps:,} DPO steps; final returns over "
-              f"{FINAL_EPISODES} deterministic episodes; mean ± std over seeds")
-    return {"budget": budget, "table": rows, "frontier": frontier, "overoptimisation": over}
+              f"{FINAL_EPISODES} deterministic episodes; mean ± std over seeds; RLHF with reward offset "
+              f"b = {offset_main:g} unless noted")
+    return {"budget": budget, "reward_offset": offset_main, "table": rows, "frontier": frontier,
+            "overoptimisation": over, "offsets": offsets}
 
 
 def print_tables(summary: dict, rms: list[dict]) -> None:
@@ -175,6 +199,12 @@ def print_tables(summary: dict, rms: list[dict]) -> None:
     for name, pts in summary["frontier"].items():
         for p in pts:
             print(f"| {name} | {p['param']} = {p['value']:g} | {p['n_seeds']} | {p['return']:.0f} | {p['kl']:.3f} |")
+    if summary.get("offsets"):
+        print("\n### RLHF's reward offset b (seed 0, KL coefficient as in the table)\n")
+        print("| offset b | true return | episode length | KL (nats/step) |")
+        print("|---:|---:|---:|---:|")
+        for o in summary["offsets"]:
+            print(f"| {o['offset']:g} | {o['return']:.0f} | {o['length']:.0f} | {o['kl']:.3f} |")
     for label, c in summary["overoptimisation"].items():
         print(f"\nOver-optimisation, {label}: true return " + " → ".join(f"{v:.0f}" for v in c["return"])
               + "; learned return " + " → ".join(f"{v:.0f}" for v in c["learned_return"]))
@@ -184,21 +214,20 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--steps", type=int, default=None, help="PPO steps per run (default: the notebook's PPO_STEPS)")
-    p.add_argument("--kl", type=float, default=0.1, help="RLHF's KL coefficient in the table")
-    p.add_argument("--beta", type=float, default=0.1, help="DPO's beta in the table")
-    p.add_argument("--kl-sweep", type=float, nargs="*", default=[0.0, 0.01, 0.03, 0.3])
+    p.add_argument("--kl", type=float, default=None, help="RLHF's KL coefficient in the table (default: KL_COEF)")
+    p.add_argument("--beta", type=float, default=None, help="DPO's beta in the table (default: the notebook's BETA)")
+    p.add_argument("--kl-sweep", type=float, nargs="*", default=[0.0, 0.01, 0.03, 0.1, 0.3])
     p.add_argument("--beta-sweep", type=float, nargs="*", default=[0.03, 0.3, 1.0])
-    p.add_argument("--offset", type=float, default=None, help="the learned reward's per-step offset b "
-                   "(default: the notebook's REWARD_OFFSET)")
+    p.add_argument("--offset-sweep", type=float, nargs="*", default=[1.0, 3.0, 8.0],
+                   help="other values of the learned reward's per-step offset b, run with --kl on seed 0")
     p.add_argument("--no-sweep", action="store_true")
+    p.add_argument("--fresh", action="store_true", help="ignore the finished runs of an interrupted earlier invocation")
     p.add_argument("--workers", type=int, default=2, help="runs at a time (wall times grow when they share cores)")
     p.add_argument("--record", action="store_true", help="write datasets/hw4/precomputed.json and record it")
     p.add_argument("--smoke", action="store_true", help="the notebook's FAST budgets, results not written")
     p.add_argument("--tables-only", action="store_true", help="reprint (and with --record, re-record) the tables "
                    "from bench/results/hw4_rlhf_dpo.json without running anything")
     args = p.parse_args(argv)
-    if args.offset is not None:
-        os.environ["HW4_BENCH_OFFSET"] = str(args.offset)
     if args.smoke:
         os.environ["HW4_BENCH_FAST"] = "1"
         global RESULTS, FINAL_EPISODES
@@ -206,11 +235,14 @@ def main(argv: list[str] | None = None) -> None:
 
     ns = solution_namespace()
     steps, dpo_steps = args.steps or ns["PPO_STEPS"], ns["DPO_STEPS"]
+    args.kl = ns["KL_COEF"] if args.kl is None else args.kl
+    args.beta = ns["BETA"] if args.beta is None else args.beta
+    offset = ns["REWARD_OFFSET"]
     if args.tables_only:
         saved = json.loads(RESULTS.read_text())
         ref_row = saved["summary"]["table"][0]
         summary = summarise(saved["runs"], {"return": ref_row["return_mean"]}, saved["args"]["kl"], saved["args"]["beta"],
-                            steps, dpo_steps)
+                            saved["summary"].get("reward_offset", offset), steps, dpo_steps)
         RESULTS.write_text(json.dumps({**saved, "summary": summary}, indent=1))
         print_tables(summary, saved["reward_models"])
         if args.record:
@@ -222,15 +254,24 @@ def main(argv: list[str] | None = None) -> None:
     if not args.no_sweep:
         jobs += [("rlhf", 0, v, steps) for v in args.kl_sweep if v != args.kl]
         jobs += [("dpo", 0, v, steps) for v in args.beta_sweep if v != args.beta]
-    print(f"{len(jobs)} runs, {args.workers} at a time", flush=True)
+        jobs += [("rlhf", 0, args.kl, steps, b) for b in args.offset_sweep if b != offset]
+        if args.offset_sweep:  # the over-optimisation panel: the smallest offset without the KL penalty
+            jobs.append(("rlhf", 0, 0.0, steps, min(args.offset_sweep)))
+    partial = RESULTS.with_suffix(".partial.json")
+    done = [] if args.fresh else _resumable(partial, steps, offset)
+    key = lambda kind, seed, value, offset_: (kind, seed, value, offset_ if kind == "rlhf" else None)
+    finished = {key(r["kind"], r["seed"], r["value"], r.get("offset")) for r in done}
+    todo = [j for j in jobs if key(j[0], j[1], j[2], j[4] if len(j) > 4 else offset) not in finished]
+    print(f"{len(jobs)} runs ({len(jobs) - len(todo)} already in {partial.name}), {args.workers} at a time", flush=True)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    results = run_all(jobs, args.workers, RESULTS.with_suffix(".partial.json"))
+    results = run_all(todo, args.workers, partial, done)
     reference = ns["load_reference"]()
     ref_eval = ns["evaluate_policy"](reference, reference, n_episodes=FINAL_EPISODES)
-    summary = summarise(results, ref_eval, args.kl, args.beta, steps, dpo_steps)
+    summary = summarise(results, ref_eval, args.kl, args.beta, offset, steps, dpo_steps)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({"args": vars(args), "reward_models": rms, "runs": results, "summary": summary,
                                    "total_wall": time.perf_counter() - start}, indent=1))
+    partial.unlink(missing_ok=True)
     print_tables(summary, rms)
     print(f"\nwrote {RESULTS}; total {time.perf_counter() - start:.0f} s")
     if args.record and not args.smoke:
@@ -245,7 +286,8 @@ def _record(summary: dict, args: dict) -> None:
     cmd = "python bench/bench_hw4_rlhf_dpo.py --record " + " ".join(
         [f"--seeds {' '.join(map(str, args['seeds']))}", f"--kl {args['kl']:g} --beta {args['beta']:g}",
          f"--kl-sweep {' '.join(f'{v:g}' for v in args['kl_sweep'])}",
-         f"--beta-sweep {' '.join(f'{v:g}' for v in args['beta_sweep'])}", f"--workers {args['workers']}"]
+         f"--beta-sweep {' '.join(f'{v:g}' for v in args['beta_sweep'])}",
+         f"--offset-sweep {' '.join(f'{v:g}' for v in args.get('offset_sweep', []))}", f"--workers {args['workers']}"]
         + (["--no-sweep"] if args["no_sweep"] else []) + ([f"--steps {args['steps']}"] if args["steps"] else []))
     data.add(PRECOMPUTED, cmd, args["seeds"][0], {"note": "PRECOMPUTED sweep and seed results plotted by hw4_rlhf_dpo",
                                                   "budget": summary["budget"]})

@@ -634,3 +634,34 @@ def test_bc_and_dagger_bounds_on_random_mdps():
         gap = total_cost(learner) - total_cost(expert)
         assert gap <= horizon**2 * eps_expert + 1e-12
         assert gap <= u * horizon * eps_learner + 1e-12
+
+
+# ---------------------------------------------------------------------------
+# the per-step constant that segment comparisons cannot identify (lecture 6)
+# ---------------------------------------------------------------------------
+def test_segment_comparisons_ignore_a_per_step_constant_that_early_termination_does_not():
+    """Equal-length segments: P(a > b) is unchanged by r -> r + c. An MDP whose "fall" action ends the
+    episode: the optimal first action flips from staying up to falling as c goes from +1 to -1."""
+    rng = np.random.default_rng(3)
+    seg_a, seg_b = rng.normal(size=(50, 7)), rng.normal(size=(50, 7))
+    for c in (-2.0, 0.5, 3.0):
+        assert np.allclose(lm.bradley_terry_prob((seg_a + c).sum(1), (seg_b + c).sum(1)),
+                           lm.bradley_terry_prob(seg_a.sum(1), seg_b.sum(1)))
+    # Unequal lengths (a segment cut short by a fall) do see the constant.
+    assert not np.allclose(lm.bradley_terry_prob((seg_a[:, :4] + 1.0).sum(1), (seg_b + 1.0).sum(1)),
+                           lm.bradley_terry_prob(seg_a[:, :4].sum(1), seg_b.sum(1)))
+
+    # States 0..3, action 0 "walk" (reward r[s], next state uniform), action 1 "lunge": reward r[s] + 0.5,
+    # then the episode ends. Horizon 20. Backward induction with termination.
+    n_states, horizon = 4, 20
+    r = rng.uniform(-0.2, 0.2, size=n_states)
+
+    def first_action(c: float) -> np.ndarray:
+        V = np.zeros(n_states)
+        for _ in range(horizon):
+            q_walk = r + c + V.mean()
+            q_lunge = r + 0.5 + c
+            V = np.maximum(q_walk, q_lunge)
+        return (q_lunge > q_walk).astype(int)
+
+    assert (first_action(+1.0) == 0).all() and (first_action(-1.0) == 1).all()

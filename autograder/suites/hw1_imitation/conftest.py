@@ -14,8 +14,8 @@ from rlcourse.nets import GaussianPolicy
 
 @pytest.fixture
 def in_sandbox(student):
-    def call(names: list[str], expr: str, timeout: float | None = None, **bindings):
-        """Evaluate ``expr`` in the student's namespace (``names``: the stubs it relies on, for the record)."""
+    def call(expr: str, timeout: float | None = None, **bindings):
+        """Evaluate ``expr`` in the student's namespace with ``bindings`` as local names."""
         return student.eval(expr, timeout=timeout, **bindings)
 
     return call

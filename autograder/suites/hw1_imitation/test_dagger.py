@@ -16,7 +16,6 @@ from rlcourse.rollouts import rollout
 HINT = ("Per iteration i: MixturePolicy(expert.act, policy.act, beta_schedule[i], rng) with one rng = "
         "np.random.default_rng(seed); rollout(mixture, env_id, episodes_per_iter, seed=seed + i * episodes_per_iter); "
         "add the real steps (episodes.obs[episodes.mask]) with the EXPERT's labels; retrain with train_bc(..., seed=seed + i).")
-NEEDS = ["bc_loss", "train_bc", "relabel_with_expert"]
 LEARNER = "(torch.manual_seed(policy_seed), GaussianPolicy(4, 1, hidden=(16,)))[1]"
 EXPERT = racetrack.Expert()
 _CACHE = {}
@@ -39,7 +38,7 @@ def _run(in_sandbox, betas, episodes=2, seed=0, policy_seed=0, learner=LEARNER, 
     train = {"n_epochs": 3, "batch_size": 64, "lr": 3e-3, **train}
     expr = (f"dagger(racetrack.ENV_ID, racetrack.Expert(), {learner}, len(betas), betas, obs, actions, "
             "episodes_per_iter=episodes, seed=seed, **train)")
-    result = in_sandbox(NEEDS, expr, betas=list(betas), obs=demo.obs, actions=demo.actions, episodes=episodes,
+    result = in_sandbox(expr, betas=list(betas), obs=demo.obs, actions=demo.actions, episodes=episodes,
                             seed=seed, policy_seed=policy_seed, train=train)
     assert isinstance(result, tuple) and len(result) == 2, "dagger should return (policy, history)"
     policy, hist = result

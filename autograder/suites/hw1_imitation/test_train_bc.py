@@ -6,7 +6,6 @@ from autograder.suite import check_array, stub
 HINT = ("Split off round(val_fraction * N) pairs with np.random.default_rng(seed); each epoch shuffle the rest, "
         "loop over minibatches (zero_grad, bc_loss, backward, step); record the epoch's mean training loss and the "
         "held-out loss; return {'train': [...], 'val': [...]}.")
-NEEDS = ["bc_loss"]
 MAKE = "(torch.manual_seed(policy_seed), GaussianPolicy(obs_dim, act_dim, hidden=hidden))[1]"
 
 
@@ -21,7 +20,7 @@ def _linear_expert(rng, n):
 def _train(in_sandbox, obs, actions, hidden=(), policy_seed=0, **kwargs):
     """(policy handle, history) of the student's train_bc on a freshly built, seeded policy."""
     expr = "(lambda p: (p, train_bc(p, obs, actions, **kw)))(" + MAKE + ")"
-    return in_sandbox(NEEDS, expr, obs=obs, actions=actions, kw=kwargs, policy_seed=policy_seed,
+    return in_sandbox(expr, obs=obs, actions=actions, kw=kwargs, policy_seed=policy_seed,
                           obs_dim=obs.shape[1], act_dim=actions.shape[1], hidden=tuple(hidden))
 
 
@@ -75,7 +74,7 @@ def test_small_float64_data_and_inputs_untouched(student, in_sandbox, rng):
     """Ten float64 pairs with a batch size of 256 train without error and leave the arrays unchanged"""
     obs, actions = rng.normal(size=(10, 3)), rng.normal(size=(10, 2))
     keep = obs.copy(), actions.copy()
-    got = in_sandbox(NEEDS, "(lambda p, o, a: (train_bc(p, o, a, n_epochs=2, batch_size=256, val_fraction=0.2, seed=0), o, a))(" + MAKE + ", obs, actions)",
+    got = in_sandbox("(lambda p, o, a: (train_bc(p, o, a, n_epochs=2, batch_size=256, val_fraction=0.2, seed=0), o, a))(" + MAKE + ", obs, actions)",
                          obs=obs, actions=actions, policy_seed=0, obs_dim=3, act_dim=2, hidden=(4,))
     hist, obs_after, actions_after = got
     _history(hist, 2)
