@@ -1,7 +1,7 @@
 """Benchmark of hw4_rlhf_dpo: true-reward PPO, RLHF and DPO from the same reference policy, over seeds,
 plus the KL-coefficient and beta sweeps that the notebook plots as precomputed. Prints Markdown tables.
 
-    python bench/bench_hw4_rlhf_dpo.py                 # 3 seeds + sweeps (about an hour on 2 idle cores)
+    python bench/bench_hw4_rlhf_dpo.py                 # 3 seeds + sweeps (about 10 minutes on 2 idle cores)
     python bench/bench_hw4_rlhf_dpo.py --seeds 0 --no-sweep --steps 20000   # a quick smoke run
     python bench/bench_hw4_rlhf_dpo.py --record        # also refresh datasets/hw4/precomputed.json + MANIFEST
 
@@ -14,6 +14,8 @@ KL(pi || pi_ref) on the states those episodes visit. Wall times are per run, mea
 runs at a time on a shared 2-core machine, so they include contention: compare them with each other,
 not with a solo run; the CPU seconds each run used (``cpu`` in the results, single-threaded torch) are
 what a solo run on an idle core would take, roughly. Results go to ``bench/results/hw4_rlhf_dpo.json``.
+Runs that an earlier invocation finished with the same settings (interrupted or not) are reused, so
+a killed benchmark resumes; ``--fresh`` measures everything again.
 """
 from __future__ import annotations
 
@@ -105,10 +107,14 @@ def job(kind: str, seed: int, value: float, steps: int | None, offset: float | N
 
 
 def _resumable(partial: Path, steps: int, offset: float) -> list[dict]:
-    """Finished runs of an interrupted earlier invocation with the same budget (none if it differs)."""
-    if not partial.exists():
+    """Finished runs of an earlier invocation with the same budget: those of an interrupted one (``partial``),
+    else those of the last complete one (the results file)."""
+    if partial.exists():
+        runs = json.loads(partial.read_text())
+    elif RESULTS.exists():
+        runs = json.loads(RESULTS.read_text())["runs"]
+    else:
         return []
-    runs = json.loads(partial.read_text())
     runs = [r for r in runs if r.get("steps") == steps and (r["kind"] != "rlhf" or "offset" in r)]
     return runs
 
@@ -164,11 +170,13 @@ def summarise(results: list[dict], ref_eval: dict, kl_main: float, beta_main: fl
             over[label] = {k: [e[k] for e in rs[0]["curve"]] for k in ("step", "return", "learned_return", "kl", "length")}
     offsets = []
     for b in sorted({r.get("offset", offset_main) for r in results if r["kind"] == "rlhf"}):
-        rs = [r for r in pick("rlhf", kl_main, offset=b) if r["seed"] == 0]
+        rs = pick("rlhf", kl_main, offset=b)
         if rs:
-            fin = rs[0]["final"]
-            offsets.append({"offset": b, "kl_coef": kl_main, "return": fin["return"], "kl": fin["kl"],
-                            "length": fin["length"], "learned_return": fin.get("learned_return")})
+            fin = [r["final"] for r in rs]
+            offsets.append({"offset": b, "kl_coef": kl_main, "seeds": [r["seed"] for r in rs],
+                            "returns": [f["return"] for f in fin], "return": float(np.mean([f["return"] for f in fin])),
+                            "return_std": float(np.std([f["return"] for f in fin])),
+                            "kl": float(np.mean([f["kl"] for f in fin])), "length": float(np.mean([f["length"] for f in fin]))})
     budget = (f"{steps:,} PPO environment steps per run, {dpo_steps:,} DPO steps; final returns over "
               f"{FINAL_EPISODES} deterministic episodes; mean ± std over seeds; RLHF with reward offset "
               f"b = {offset_main:g} unless noted")
@@ -200,11 +208,12 @@ def print_tables(summary: dict, rms: list[dict]) -> None:
         for p in pts:
             print(f"| {name} | {p['param']} = {p['value']:g} | {p['n_seeds']} | {p['return']:.0f} | {p['kl']:.3f} |")
     if summary.get("offsets"):
-        print("\n### RLHF's reward offset b (seed 0, KL coefficient as in the table)\n")
-        print("| offset b | true return | episode length | KL (nats/step) |")
-        print("|---:|---:|---:|---:|")
+        print("\n### RLHF's reward offset b (KL coefficient as in the table)\n")
+        print("| offset b | seeds | true return | per seed | episode length | KL (nats/step) |")
+        print("|---:|---:|---:|---|---:|---:|")
         for o in summary["offsets"]:
-            print(f"| {o['offset']:g} | {o['return']:.0f} | {o['length']:.0f} | {o['kl']:.3f} |")
+            print(f"| {o['offset']:g} | {len(o['seeds'])} | {o['return']:.0f} ± {o['return_std']:.0f} | "
+                  + ", ".join(f"{v:.0f}" for v in o["returns"]) + f" | {o['length']:.0f} | {o['kl']:.3f} |")
     for label, c in summary["overoptimisation"].items():
         print(f"\nOver-optimisation, {label}: true return " + " → ".join(f"{v:.0f}" for v in c["return"])
               + "; learned return " + " → ".join(f"{v:.0f}" for v in c["learned_return"]))
@@ -219,9 +228,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--kl-sweep", type=float, nargs="*", default=[0.0, 0.01, 0.03, 0.1, 0.3])
     p.add_argument("--beta-sweep", type=float, nargs="*", default=[0.03, 0.3, 1.0])
     p.add_argument("--offset-sweep", type=float, nargs="*", default=[1.0, 3.0, 8.0],
-                   help="other values of the learned reward's per-step offset b, run with --kl on seed 0")
+                   help="other values of the learned reward's per-step offset b, run with --kl on every seed")
     p.add_argument("--no-sweep", action="store_true")
-    p.add_argument("--fresh", action="store_true", help="ignore the finished runs of an interrupted earlier invocation")
+    p.add_argument("--fresh", action="store_true", help="measure every run again (by default, runs with the same "
+                   "settings that an earlier invocation finished, interrupted or not, are reused)")
     p.add_argument("--workers", type=int, default=2, help="runs at a time (wall times grow when they share cores)")
     p.add_argument("--record", action="store_true", help="write datasets/hw4/precomputed.json and record it")
     p.add_argument("--smoke", action="store_true", help="the notebook's FAST budgets, results not written")
@@ -254,7 +264,7 @@ def main(argv: list[str] | None = None) -> None:
     if not args.no_sweep:
         jobs += [("rlhf", 0, v, steps) for v in args.kl_sweep if v != args.kl]
         jobs += [("dpo", 0, v, steps) for v in args.beta_sweep if v != args.beta]
-        jobs += [("rlhf", 0, args.kl, steps, b) for b in args.offset_sweep if b != offset]
+        jobs += [("rlhf", s, args.kl, steps, b) for s in args.seeds for b in args.offset_sweep if b != offset]
         if args.offset_sweep:  # the over-optimisation panel: the smallest offset without the KL penalty
             jobs.append(("rlhf", 0, 0.0, steps, min(args.offset_sweep)))
     partial = RESULTS.with_suffix(".partial.json")
@@ -262,7 +272,8 @@ def main(argv: list[str] | None = None) -> None:
     key = lambda kind, seed, value, offset_: (kind, seed, value, offset_ if kind == "rlhf" else None)
     finished = {key(r["kind"], r["seed"], r["value"], r.get("offset")) for r in done}
     todo = [j for j in jobs if key(j[0], j[1], j[2], j[4] if len(j) > 4 else offset) not in finished]
-    print(f"{len(jobs)} runs ({len(jobs) - len(todo)} already in {partial.name}), {args.workers} at a time", flush=True)
+    print(f"{len(jobs)} runs ({len(jobs) - len(todo)} reused from an earlier invocation), {args.workers} at a time",
+          flush=True)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     results = run_all(todo, args.workers, partial, done)
     reference = ns["load_reference"]()
