@@ -87,7 +87,9 @@ This folder holds everything you need for the course:
 - `lectures/`: the lecture notes (Markdown with math; read them on GitHub or build the site).
 - `assignments/<id>/<id>.ipynb`: the assignments, `hw0_setup` first.
 - `rlcourse/`: the small library the notebooks import (environments, policies, rollouts, plots, videos).
-- `datasets/`: the data the assignments use, checked against `datasets/MANIFEST.json` when loaded.
+- `datasets/`: the data the assignments use, checked against `datasets/MANIFEST.json` when loaded. Each
+  entry names the command that made its file; those scripts (`datasets/scripts/`) stay in the
+  instructors' repository, since some of them fit models you write in the assignments.
 
 ## Set up (Python 3.11)
 
