@@ -129,6 +129,12 @@ def make_envs(n_envs: int, env_id: str = ENV_ID, wrap: Optional[Callable] = None
     return wrap(envs) if wrap is not None else envs
 
 
+def log_series(rows: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(steps, values)`` of ``key`` over the logged rows that have it (each row has a ``step``)."""
+    rows = [r for r in rows if key in r]
+    return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
+
+
 @dataclass
 class PPOLog:
     """What :func:`ppo` records. ``iterations`` holds one dict per update (``step``, ``time``, the
@@ -141,8 +147,7 @@ class PPOLog:
 
     def series(self, key: str, source: str = "evals") -> tuple[np.ndarray, np.ndarray]:
         """``(steps, values)`` of ``key`` over the evaluations (or the iterations)."""
-        rows = [r for r in getattr(self, source) if key in r]
-        return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
+        return log_series(getattr(self, source), key)
 
 
 def ppo(policy: GaussianPolicy, reference: GaussianPolicy, compute_gae: Callable, ppo_loss: Callable,

@@ -25,6 +25,7 @@ from torch.distributions import kl_divergence
 
 from rlcourse import data as _data
 from rlcourse.nets import GaussianPolicy
+from rlcourse.ppo import log_series
 from rlcourse.preferences import RewardEnsemble
 from rlcourse.rollouts import rollout
 
@@ -137,8 +138,8 @@ class DPOLog:
     evals: list[dict] = field(default_factory=list)
 
     def series(self, key: str, source: str = "evals") -> tuple[np.ndarray, np.ndarray]:
-        rows = [r for r in getattr(self, source) if key in r]
-        return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
+        """``(steps, values)`` of ``key`` over the evaluations (or the logged steps)."""
+        return log_series(getattr(self, source), key)
 
 
 def train_dpo(policy: GaussianPolicy, reference: GaussianPolicy, dpo_loss: Callable, train: SegmentPairs,
