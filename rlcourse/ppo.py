@@ -129,25 +129,27 @@ def make_envs(n_envs: int, env_id: str = ENV_ID, wrap: Optional[Callable] = None
     return wrap(envs) if wrap is not None else envs
 
 
-def log_series(rows: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
-    """``(steps, values)`` of ``key`` over the logged rows that have it (each row has a ``step``)."""
-    rows = [r for r in rows if key in r]
-    return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
-
-
 @dataclass
-class PPOLog:
-    """What :func:`ppo` records. ``iterations`` holds one dict per update (``step``, ``time``, the
-    loss terms, ``approx_kl``, ``clip_frac``, ``explained_var``, the mean training-episode returns);
-    ``evals`` one dict per evaluation (``step``, ``time`` and what ``evaluate`` returned)."""
+class TrainingLog:
+    """What a training loop records: its ``config``, and one dict per evaluation in ``evals``
+    (``step``, ``time`` and what ``evaluate`` returned). Subclasses add their per-update rows."""
 
     config: dict
-    iterations: list[dict] = field(default_factory=list)
     evals: list[dict] = field(default_factory=list)
 
     def series(self, key: str, source: str = "evals") -> tuple[np.ndarray, np.ndarray]:
-        """``(steps, values)`` of ``key`` over the evaluations (or the iterations)."""
-        return log_series(getattr(self, source), key)
+        """``(steps, values)`` of ``key`` over the rows of ``source`` that have it (each row has a ``step``)."""
+        rows = [r for r in getattr(self, source) if key in r]
+        return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
+
+
+@dataclass
+class PPOLog(TrainingLog):
+    """What :func:`ppo` records: besides ``evals``, ``iterations`` holds one dict per update (``step``,
+    ``time``, the loss terms, ``approx_kl``, ``clip_frac``, ``explained_var``, the mean training-episode
+    returns)."""
+
+    iterations: list[dict] = field(default_factory=list)
 
 
 def ppo(policy: GaussianPolicy, reference: GaussianPolicy, compute_gae: Callable, ppo_loss: Callable,

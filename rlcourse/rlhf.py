@@ -25,7 +25,7 @@ from torch.distributions import kl_divergence
 
 from rlcourse import data as _data
 from rlcourse.nets import GaussianPolicy
-from rlcourse.ppo import log_series
+from rlcourse.ppo import TrainingLog
 from rlcourse.preferences import RewardEnsemble
 from rlcourse.rollouts import rollout
 
@@ -129,17 +129,11 @@ def evaluate_policy(policy: GaussianPolicy, reference: Optional[GaussianPolicy] 
 
 # --------------------------------------------------------------------------- DPO
 @dataclass
-class DPOLog:
-    """One dict per logged step (``step``, ``time``, ``loss``, ``margin``, ``accuracy``, and the held-out
-    ``val_margin``, ``val_accuracy``) in ``steps``; one per evaluation in ``evals``."""
+class DPOLog(TrainingLog):
+    """What :func:`train_dpo` records: besides ``evals``, one dict per logged step in ``steps`` (``step``,
+    ``time``, ``loss``, ``margin``, ``accuracy``, and the held-out ``val_margin``, ``val_accuracy``)."""
 
-    config: dict
     steps: list[dict] = field(default_factory=list)
-    evals: list[dict] = field(default_factory=list)
-
-    def series(self, key: str, source: str = "evals") -> tuple[np.ndarray, np.ndarray]:
-        """``(steps, values)`` of ``key`` over the evaluations (or the logged steps)."""
-        return log_series(getattr(self, source), key)
 
 
 def train_dpo(policy: GaussianPolicy, reference: GaussianPolicy, dpo_loss: Callable, train: SegmentPairs,

@@ -132,10 +132,10 @@ def test_config_sizes():
 
 
 def test_log_series_keeps_rows_that_have_the_key_in_order():
-    from rlcourse.ppo import PPOLog, log_series
+    from rlcourse.ppo import PPOLog, TrainingLog
 
     rows = [{"step": 0, "return": 1.0}, {"step": 5}, {"step": 9, "return": 3.0}]
-    steps, values = log_series(rows, "return")
+    steps, values = TrainingLog(config={}, evals=rows).series("return")
     assert steps.tolist() == [0, 9] and values.tolist() == [1.0, 3.0] and values.dtype == float
     log = PPOLog(config={}, iterations=[{"step": 2, "kl": 0.1}], evals=rows)
     assert log.series("kl", "iterations")[1].tolist() == [0.1] and log.series("return")[0].tolist() == [0, 9]
