@@ -19,6 +19,7 @@ from pathlib import Path
 def _cmd_grade(args: argparse.Namespace) -> int:
     from autograder.grader import Grader
     from autograder.report import summary_lines, write_outputs
+    from autograder.results import GraderError
 
     from autograder import course
     from autograder.batch import choose_notebook, notebooks_in
@@ -31,11 +32,16 @@ def _cmd_grade(args: argparse.Namespace) -> int:
         if entry.notebook is None:
             raise SystemExit(f"{notebook}: {entry.problem}")
         notebook, note = entry.notebook, entry.note
-    grader = Grader(args.assignment, hidden=[args.out])
+    try:
+        grader = Grader(args.assignment)
+    except GraderError as err:
+        return _grader_failed(str(err))
     try:
         result = grader.grade(notebook)
     finally:
         grader.close()
+    if not result.has_score:
+        return _grader_failed(result.error)
     if note:
         result.notes.insert(0, note)
     write_outputs(result, args.out)
@@ -43,6 +49,17 @@ def _cmd_grade(args: argparse.Namespace) -> int:
     print("\n".join(summary_lines(result)))
     print(f"wrote {args.out / 'results.json'} and {args.out / 'feedback.md'}")
     return 0
+
+
+GRADER_FAULT_EXIT = 3
+"""The exit status when the grader itself failed (2 is argparse's, for a bad command line)."""
+
+
+def _grader_failed(reason: str) -> int:
+    print(f"NOT GRADED: the grader itself failed, so no score was written.\n  {reason}\n"
+          "This is not the submission's fault. Check the course set-up (`make test` runs the grader's own "
+          "tests), fix it, then grade again.", file=sys.stderr)
+    return GRADER_FAULT_EXIT
 
 
 def _warn_isolation(level: str) -> None:
@@ -54,11 +71,19 @@ def _warn_isolation(level: str) -> None:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from autograder.batch import GRADEBOOK_NAME, run_batch
 
+    from autograder.results import GRADED, GRADER_ERROR, UNGRADABLE
+
     results = run_batch(args.assignment, args.folder, args.out, jobs=args.jobs)
     _warn_isolation("none" if any(r.isolation == "none" for r in results) else "full")
-    graded = sum(1 for r in results if not r.error)
-    print(f"{len(results)} submissions ({graded} graded, {len(results) - graded} ungradable); "
-          f"gradebook: {args.out / GRADEBOOK_NAME}")
+    count = {status: sum(r.status == status for r in results) for status in (GRADED, UNGRADABLE, GRADER_ERROR)}
+    print(f"{len(results)} submissions ({count[GRADED]} graded, {count[UNGRADABLE]} ungradable, "
+          f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {args.out / GRADEBOOK_NAME}")
+    if count[GRADER_ERROR]:
+        failed = next(r for r in results if r.status == GRADER_ERROR)
+        print(f"the grader failed on {count[GRADER_ERROR]} submission(s), e.g. {failed.submission}: {failed.error}\n"
+              "their rows have status grader_error and no score; fix the grader and run the same command again "
+              "to grade just those", file=sys.stderr)
+        return GRADER_FAULT_EXIT
     return 0
 
 

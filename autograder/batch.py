@@ -18,9 +18,10 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from autograder import course
-from autograder.grader import GradeResult, Grader
+from autograder.grader import Grader
 from autograder.notebook import NotebookError, find_stubs, read_submission
-from autograder.report import RESULT_NAME, result_from_dict, write_gradebook, write_outputs
+from autograder.report import RESULT_NAME, write_gradebook, write_outputs
+from autograder.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, result_from_dict
 
 GRADEBOOK_NAME = "gradebook.csv"
 
@@ -35,6 +36,30 @@ class Entry:
 
 def _safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "submission"
+
+
+def unique_safe_names(names: list[str]) -> list[str]:
+    """Folder-safe names, made safe first and unique second, the same on every run (resuming needs that).
+
+    ``alice smith`` and ``alice_smith`` are both ``alice_smith`` once safe: the first (in the order
+    given, which is sorted) keeps it, the next becomes ``alice_smith-2`` (or the next number that
+    no other submission's name takes). Names are compared case-insensitively, as some file systems do.
+    """
+    safe = [_safe_name(n) for n in names]
+    used = {name.lower() for name in safe}
+    kept: set[str] = set()
+    out = []
+    for name in safe:
+        if name.lower() not in kept:
+            kept.add(name.lower())
+            out.append(name)
+            continue
+        n = 2
+        while f"{name}-{n}".lower() in used:
+            n += 1
+        used.add(f"{name}-{n}".lower())
+        out.append(f"{name}-{n}")
+    return out
 
 
 def notebooks_in(folder: Path) -> list[Path]:
@@ -78,9 +103,8 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
         elif child.is_dir():
             inner = child / assignment if (child / assignment).is_dir() else child
             entries.append(choose_notebook(child.name, notebooks_in(inner), assignment, expected))
-    names = [e.name for e in entries]
-    for e in entries:  # keep folder names unique on disk
-        e.name = _safe_name(e.name) if names.count(e.name) == 1 else _safe_name(f"{e.name}_{id(e)}")
+    for entry, name in zip(entries, unique_safe_names([e.name for e in entries])):
+        entry.name = name
     return entries
 
 
@@ -89,13 +113,22 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
 _grader: Grader | None = None
 
 
-def _init(assignment: str, hidden: list[str]) -> None:
-    global _grader
-    _grader = Grader(assignment, hidden=[Path(p) for p in hidden])
+_grader_failure: str | None = None
 
 
-def _grade_one(entry: Entry, out_dir: str) -> str:
-    result = _grader.grade(entry.notebook, name=entry.name)
+def _init(assignment: str) -> None:
+    global _grader, _grader_failure
+    try:
+        _grader = Grader(assignment)
+    except GraderError as err:  # every submission this process takes is then a grader error
+        _grader_failure = str(err)
+
+
+def _grade_one(entry: Entry, out_dir: str, assignment: str) -> str:
+    if _grader is None:
+        result = _grader_error(assignment, entry, _grader_failure or "the grader could not be built")
+    else:
+        result = _grader.grade(entry.notebook, name=entry.name)
     if entry.note:
         result.notes.insert(0, entry.note)
     write_outputs(result, Path(out_dir) / entry.name)
@@ -110,8 +143,18 @@ def _load(out_dir: Path, name: str) -> GradeResult | None:
         return None
 
 
+def _done(out_dir: Path, name: str) -> bool:
+    """Graded (or ungradable) already; a grader error is retried on every run until it grades."""
+    result = _load(out_dir, name)
+    return result is not None and result.status != GRADER_ERROR
+
+
 def _ungradable(assignment: str, entry: Entry, reason: str) -> GradeResult:
-    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason)
+    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=UNGRADABLE)
+
+
+def _grader_error(assignment: str, entry: Entry, reason: str) -> GradeResult:
+    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=GRADER_ERROR)
 
 
 def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True) -> list[GradeResult]:
@@ -120,11 +163,10 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     course.check_assignment(assignment)
     expected = course.stub_names(assignment)
     entries = discover(folder, assignment, expected)
-    todo = [e for e in entries if e.notebook is not None and _load(out_dir, e.name) is None]
+    todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
-        if e.notebook is None and _load(out_dir, e.name) is None:
+        if e.notebook is None and not _done(out_dir, e.name):
             write_outputs(_ungradable(assignment, e, e.problem), out_dir / e.name)
-    hidden = [str(Path(folder).resolve()), str(out_dir.resolve())]
     bar = tqdm(total=len(entries), initial=len(entries) - len(todo), desc=f"grading {assignment}",
                unit="submission", disable=not progress)
     attempts = 0
@@ -132,22 +174,24 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
         attempts += 1
         try:
             with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=_init,
-                                     initargs=(assignment, hidden)) as pool:
-                futures = {pool.submit(_grade_one, e, str(out_dir)): e for e in todo}
+                                     initargs=(assignment,)) as pool:
+                futures = {pool.submit(_grade_one, e, str(out_dir), assignment): e for e in todo}
                 for future in as_completed(futures):
                     entry = futures[future]
                     try:
                         future.result()
                     except BrokenProcessPool:
                         raise
-                    except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission
-                        write_outputs(_ungradable(assignment, entry, f"internal grader error: {err}"), out_dir / entry.name)
+                    except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission, nor grade it
+                        write_outputs(_grader_error(assignment, entry, f"internal grader error: {err}"),
+                                      out_dir / entry.name)
                     bar.update(1)
         except BrokenProcessPool:
             pass  # a grading process died; the finished results are on disk, retry the rest
         todo = [e for e in todo if _load(out_dir, e.name) is None]
     for e in todo:
-        write_outputs(_ungradable(assignment, e, "the grader process died repeatedly on this submission"), out_dir / e.name)
+        write_outputs(_grader_error(assignment, e, "the grading process died repeatedly on this submission"),
+                      out_dir / e.name)
         bar.update(1)
     bar.close()
     results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]

@@ -49,13 +49,42 @@ def limits(assignment: str) -> "Limits":
     """The sandbox limits of an assignment: defaults, overridden by its suite's ``limits.json``."""
     import json
 
-    from autograder.sandbox import Limits
+    from autograder.sandbox.config import Limits
 
     path = suite_dir(assignment) / "limits.json"
     return Limits(**json.loads(path.read_text())) if path.exists() else Limits()
 
 
-def secret_paths() -> list[Path]:
-    """What a sandbox must never read: solutions, suites and samples."""
-    roots = dict.fromkeys([REPO, INSTALLED])
-    return [root / part for root in roots for part in ("solutions", "autograder/suites", "autograder/samples")]
+STUDENT_RELEASE = ("assignments", "lectures", "rlcourse", "datasets")
+"""The folders of the student release (``make student-release``), and all a sandbox shows of the course."""
+INSTRUCTOR_ONLY = ("datasets/scripts", "lectures/figures/make_figures.py")
+"""Instructor tools inside those folders, left out of both: the data scripts fit models that students
+write, and the figure script computes soft value iteration, visitation frequencies and RUCB."""
+
+
+def release_paths(root: Path) -> tuple[list[Path], list[Path]]:
+    """The released folders of the course at ``root``, and the instructor-only paths inside them."""
+    shown = [root / name for name in STUDENT_RELEASE if (root / name).exists()]
+    masked = [root / name for name in INSTRUCTOR_ONLY if (root / name).exists()]
+    return shown, masked
+
+
+def sandbox_view() -> "View":
+    """What a sandbox worker sees: the student release of this course and of the installed library,
+    and the Python environment; read as the owner of the installed checkout."""
+    import sys
+
+    from autograder.sandbox.config import View
+
+    shown, masked = [], []
+    for root in dict.fromkeys([INSTALLED, REPO]):
+        s, m = release_paths(Path(root))
+        shown += s
+        masked += m
+    python = [Path(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix)]
+    paths = [*shown, *python, *(p.resolve() for p in (*shown, *python))]
+    paths = sorted({str(p) for p in paths})
+    outermost = [p for p in paths if not any(p != q and p.startswith(q.rstrip("/") + "/") for q in paths)]
+    owner = INSTALLED.stat()
+    return View(outermost, sorted({str(p) for p in (*masked, *(m.resolve() for m in masked))}),
+                (owner.st_uid, owner.st_gid))

@@ -26,70 +26,34 @@ import pytest
 from autograder import course
 from autograder.notebook import (NotebookError, find_stubs, imported_modules, manual_cells, read_notebook,
                                  read_submission, release_plan, with_parameters)
-from autograder.sandbox import Limits, Zygote
-from autograder.session import (Cell, CellStatus, LocalTransport, Namespace, SandboxFailure, Session,
-                                StudentError)
-from autograder.wire import ProtocolError, decode, encode
+from autograder.results import (GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, StubResult, TestOutcome)
+from autograder.sandbox.config import Limits, SpawnConfig
+from autograder.sandbox.wire import ProtocolError, decode, encode
+from autograder.session import (Cell, CellStatus, LocalTransport, Namespace, SandboxFailure, SandboxTimeout,
+                                Session, StudentError)
+from autograder.supervisor import Zygote, reference_namespace
 
 FAST_PARAMETERS = {"FAST": True}
-
-
-@dataclass
-class TestOutcome:
-    name: str
-    stub: str
-    points: float
-    passed: bool
-    message: str = ""
-    hint: str | None = None
-    seconds: float = 0.0
-
-
-@dataclass
-class StubResult:
-    name: str
-    tests: list[TestOutcome] = field(default_factory=list)
-    note: str = ""
-
-    @property
-    def score(self) -> float:
-        return sum(t.points for t in self.tests if t.passed)
-
-    @property
-    def max_score(self) -> float:
-        return sum(t.points for t in self.tests)
-
-
-@dataclass
-class GradeResult:
-    assignment: str
-    submission: str
-    stubs: list[StubResult]
-    manual: list[tuple[str, float]]
-    notes: list[str] = field(default_factory=list)
-    error: str | None = None
-    isolation: str = "unknown"
-    seconds: float = 0.0
-
-    @property
-    def score(self) -> float:
-        return sum(s.score for s in self.stubs)
-
-    @property
-    def max_score(self) -> float:
-        return sum(s.max_score for s in self.stubs)
+SUITE_LOG_CHARS = 3000
+"""The end of pytest's own output quoted when a suite cannot run (the traceback that matters is last)."""
+REFERENCE_ERROR_CHARS = 300
+"""How much of a reference's exception a stand-in passes back to student code."""
 
 
 def feedback_message(exc: BaseException) -> str:
     """What a failed test tells the student."""
     if isinstance(exc, StudentError):
-        if exc.kind == "NotImplementedError":
+        if exc.not_implemented:
             return "not implemented yet: the stub still raises NotImplementedError"
+        if exc.not_defined:
+            return str(exc)
         return f"your code raised {exc}"
     if isinstance(exc, SandboxFailure):
         return f"your code {exc}"
     if isinstance(exc, AssertionError):
-        return str(exc).split("\nassert ")[0].strip() or "a hidden check failed"
+        # The suite's own message, without the comparison that pytest's assertion rewriting appends.
+        message = exc.args[0] if exc.args and isinstance(exc.args[0], str) else ""
+        return message.strip() or "a hidden check failed"
     if isinstance(exc, pytest.fail.Exception):
         return str(exc.msg)
     return f"the result could not be checked ({type(exc).__name__}: {str(exc)[:300]}); check its type and shape"
@@ -103,6 +67,7 @@ class SuitePlugin:
         self.student_ns, self.reference_ns, self.status = student, reference, status
         self.session, self.dependencies = session, dependencies or {}
         self.outcomes: list[TestOutcome] = []
+        self.grader_faults: list[str] = []
         self.collected: list[tuple[Any, pytest.Item]] = []
 
     def pytest_collection_modifyitems(self, items: list[pytest.Item]) -> None:
@@ -145,12 +110,15 @@ class SuitePlugin:
             marker = item.get_closest_marker("stub")
             kwargs = marker.kwargs if marker else {"name": "(unmarked)", "points": 0}
             exc = call.excinfo.value if call.excinfo is not None else None
-            if isinstance(exc, SandboxFailure) and "timed out" in str(exc) and marker:
+            if isinstance(exc, GraderError):
+                self.grader_faults.append(f"{item.name}: {exc}")
+            if isinstance(exc, SandboxTimeout) and marker:
                 # Later checks of a stub that hangs would each wait out the limit again: fail them at once.
                 self.status[kwargs["name"]] = CellStatus(False, f"not run: an earlier check of this stub {exc}")
             self.outcomes.append(TestOutcome(
                 name=_title(item), stub=kwargs["name"], points=float(kwargs.get("points", 0)), passed=report.passed,
-                message="" if exc is None else feedback_message(exc), hint=kwargs.get("hint"),
+                message="" if exc is None else feedback_message(exc),
+                hint=None if report.passed else kwargs.get("hint"),  # a hint is for a failed test only
                 seconds=report.duration))
 
 
@@ -161,8 +129,11 @@ def _title(item: pytest.Item) -> str:
 
 
 def build_reference(assignment: str, parameters: dict[str, Any] = FAST_PARAMETERS) -> dict[str, Any]:
-    """Run the solution notebook's parameters (overridden by ``parameters``), setup and solution cells."""
-    namespace: dict[str, Any] = {"__name__": "__reference__"}
+    """Run the solution notebook's parameters (overridden by ``parameters``), setup and solution cells.
+
+    The namespace is recorded (see :mod:`autograder.supervisor`): no sandbox zygote may fork while it lives.
+    """
+    namespace = reference_namespace()
     for cell in release_plan(read_notebook(course.solution_notebook(assignment))):
         source = with_parameters(cell.source, parameters) if cell.kind == "parameters" else cell.source
         with contextlib.redirect_stdout(io.StringIO()):
@@ -184,21 +155,13 @@ def stub_dependencies(assignment: str, stubs: list[str]) -> dict[str, list[str]]
     return out
 
 
-def _safe_hidden(paths: list[Path]) -> list[str]:
-    """Paths to hide, minus any that would hide the course code or the Python environment itself."""
-    keep = [Path(p).resolve() for p in (course.REPO, sys.prefix, sys.base_prefix)]
-    out = []
-    for path in paths:
-        path = Path(path).resolve()
-        if path.exists() and not any(k == path or k.is_relative_to(path) for k in keep):
-            out.append(str(path))
-    return out
-
-
 class Grader:
-    """Grades submissions of one assignment; build once, call :meth:`grade` many times."""
+    """Grades submissions of one assignment; build once, call :meth:`grade` many times.
 
-    def __init__(self, assignment: str, limits: Limits | None = None, hidden: list[Path] = ()) -> None:
+    Raises :class:`GraderError` when it cannot be built (the reference or the suite fails).
+    """
+
+    def __init__(self, assignment: str, limits: Limits | None = None) -> None:
         course.check_assignment(assignment)
         self.assignment, self.limits = assignment, limits or course.limits(assignment)
         self.suite = course.suite_dir(assignment)
@@ -206,12 +169,20 @@ class Grader:
         self.plan = release_plan(release)
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
         self.manual = manual_cells(release)
-        # The zygote forks before this process runs anything heavy (the reference, pytest).
+        # The zygote forks first, before this process holds anything secret (it refuses otherwise).
         self.zygote = Zygote(imported_modules([c.source for c in self.plan if c.kind != "stub"]))
-        self.reference_ns = build_reference(assignment)
-        self.hidden = _safe_hidden([*course.secret_paths(), *hidden])
-        self.readonly = sorted({str(Path(p).resolve()) for p in (course.REPO, course.INSTALLED, sys.prefix)})
-        self.catalogue = self._catalogue()
+        self.config = SpawnConfig(course.sandbox_view(), self.limits)
+        try:
+            self.reference_ns = build_reference(assignment)
+        except Exception as err:  # noqa: BLE001 - a broken solution notebook is the course's bug
+            self.zygote.close()
+            raise GraderError(f"the reference solution of {assignment} could not be built: "
+                              f"{type(err).__name__}: {err}") from err
+        try:
+            self.catalogue = self._catalogue()
+        except GraderError:
+            self.close()
+            raise
         self.dependencies = stub_dependencies(assignment, self.expected)
 
     def _reference_call(self, name: str, tree: Any, blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
@@ -225,7 +196,7 @@ class Grader:
             out_tree, out_blobs = encode(value)
             return {"ok": True, "value": out_tree}, out_blobs
         except Exception as err:  # noqa: BLE001 - reported to the student's code as an exception
-            return {"ok": False, "error": f"{type(err).__name__}: {str(err)[:300]}"}, []
+            return {"ok": False, "error": f"{type(err).__name__}: {str(err)[:REFERENCE_ERROR_CHARS]}"}, []
 
     def _catalogue(self) -> list[TestOutcome]:
         """Every hidden test with its stub and points (collected, not run), for results that cannot run."""
@@ -245,7 +216,9 @@ class Grader:
                 cells.append(Cell(c.label, stubs[c.label].source, stub=c.label))
         return cells
 
-    def grade(self, path: str | Path, name: str | None = None, hidden: list[Path] = ()) -> GradeResult:
+    def grade(self, path: str | Path, name: str | None = None) -> GradeResult:
+        """Grade one notebook. A fault of the grader comes back as a result of status ``grader_error``,
+        with no score; an unreadable submission as ``ungradable``."""
         start = time.monotonic()
         path = Path(path)
         result = GradeResult(self.assignment, name or path.name, [], list(self.manual))
@@ -255,25 +228,23 @@ class Grader:
             return self._ungradable(result, f"could not read the notebook: {err}", start)
         stubs, match_notes = find_stubs(nb, self.expected)
         result.notes += notes + match_notes
-        session = Session(self.zygote, self.cells_for(stubs), self.hidden + _safe_hidden(list(hidden)),
-                          self.readonly, self.limits)
-        for missing in set(self.expected) - set(stubs):
-            session.status[missing] = CellStatus(False, f"no cell defines `{missing}` (was its cell deleted, or the "
-                                                          "function renamed?)")
+        session = Session(self.zygote, self.cells_for(stubs), self.config, reference_call=self._reference_call,
+                          missing=[s for s in self.expected if s not in stubs])
         try:
             session.start()
             broken_setup = [s.message for label, s in session.status.items()
                             if not s.ok and label not in self.expected]
             if broken_setup:
-                for stub in self.expected:
-                    session.status[stub] = CellStatus(False, "the notebook's setup failed in the grader: "
-                                                             + broken_setup[0])
+                self._blame_setup(session, broken_setup[0])
             result.isolation = session.isolation
-            session.reference_call = self._reference_call
             plugin = SuitePlugin(Namespace(session, "student"),
                                  Namespace(LocalTransport(self.reference_ns), "reference"), session.status,
                                  session, self.dependencies)
             self._run_suite(plugin)
+            if plugin.grader_faults:
+                raise GraderError("; ".join(plugin.grader_faults))
+        except GraderError as err:
+            return self.grader_error(result.submission, str(err), result.notes, start)
         except SandboxFailure as err:
             return self._ungradable(result, str(err), start)
         finally:
@@ -284,18 +255,43 @@ class Grader:
         result.seconds = time.monotonic() - start
         return result
 
+    def _blame_setup(self, session: Session, failure: str) -> None:
+        """A released setup cell failed: the grader's fault if it fails alone too, else the stubs' before it."""
+        alone = Session(self.zygote, [c for c in session.cells if c.stub is None], self.config)
+        try:
+            alone.start()
+            fails_alone = not all(s.ok for s in alone.status.values())
+        finally:
+            alone.close()
+        if fails_alone:
+            raise GraderError(f"the released notebook's setup fails in the sandbox: {failure}")
+        for stub in self.expected:
+            session.status[stub] = CellStatus(False, "the notebook's setup failed after your cells ran (does a "
+                                                     f"cell of yours redefine or delete a name it uses?): {failure}")
+
+    def grader_error(self, name: str, reason: str, notes: list[str] = (), start: float | None = None) -> GradeResult:
+        """A result that says the grader failed: no stubs, no score (see :mod:`autograder.results`)."""
+        seconds = 0.0 if start is None else time.monotonic() - start
+        return GradeResult(self.assignment, name, [], list(self.manual), list(notes), reason, seconds=seconds,
+                           status=GRADER_ERROR)
+
     def _run_suite(self, plugin: SuitePlugin, *extra: str) -> None:
         suite = self.suite
+        # Plain asserts: a failed check's message is exactly the suite's text, the feedback the student reads.
         args = [str(suite), *extra, "-q", "-p", "no:cacheprovider", "--import-mode=importlib", "-c", os.devnull,
-                "--rootdir", str(suite), "-o", "python_files=test_*.py", "-W", "ignore::DeprecationWarning"]
+                "--rootdir", str(suite), "-o", "python_files=test_*.py", "-W", "ignore::DeprecationWarning",
+                "--assert=plain"]
         log = io.StringIO()
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             code = pytest.main(args, plugins=[plugin])
         for module in [m for m, mod in sys.modules.items() if str(getattr(mod, "__file__", "")).startswith(str(suite))]:
             del sys.modules[module]
+        for name in ("last_type", "last_value", "last_traceback"):  # pytest keeps a failed test's frames there
+            if hasattr(sys, name):
+                delattr(sys, name)
         if code not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED) or not (plugin.outcomes or plugin.collected):
-            raise RuntimeError(f"the hidden suite of {self.assignment} could not run (pytest exit {code}):\n"
-                               + log.getvalue()[-3000:])
+            raise GraderError(f"the hidden suite of {self.assignment} could not run (pytest exit {code}):\n"
+                              + log.getvalue()[-SUITE_LOG_CHARS:])
 
     def _collect(self, outcomes: list[TestOutcome]) -> list[StubResult]:
         by_stub = {name: StubResult(name) for name in self.expected}
@@ -306,7 +302,8 @@ class Grader:
     def ungradable(self, name: str, reason: str, notes: list[str] = ()) -> GradeResult:
         """A result with every hidden test failed for ``reason``: the submission stays in the gradebook."""
         failed = [TestOutcome(t.name, t.stub, t.points, False, reason, t.hint) for t in self.catalogue]
-        return GradeResult(self.assignment, name, self._collect(failed), list(self.manual), list(notes), reason)
+        return GradeResult(self.assignment, name, self._collect(failed), list(self.manual), list(notes), reason,
+                           status=UNGRADABLE)
 
     def _ungradable(self, result: GradeResult, reason: str, start: float) -> GradeResult:
         out = self.ungradable(result.submission, reason, result.notes)
@@ -314,4 +311,6 @@ class Grader:
         return out
 
     def close(self) -> None:
+        """Stop the zygote and let the reference go (so another grader may start in this process)."""
         self.zygote.close()
+        self.reference_ns = None

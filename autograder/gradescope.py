@@ -60,8 +60,9 @@ def build_bundle(assignment: str, out: Path | None = None) -> Path:
     for name in ("pyproject.toml", "README.md"):
         members.append((repo / name, name))
     add_tree(repo / "rlcourse", "rlcourse")
-    for path in sorted((repo / "autograder").glob("*.py")):
-        members.append((path, f"autograder/{path.name}"))
+    for path in sorted((repo / "autograder").rglob("*.py")):
+        if "suites" not in path.relative_to(repo / "autograder").parts and "__pycache__" not in path.parts:
+            members.append((path, path.relative_to(repo).as_posix()))
     add_tree(course.suite_dir(assignment), f"autograder/suites/{assignment}")
     add_tree(course.solution_notebook(assignment).parent, f"solutions/{assignment}")
     add_tree(course.release_notebook(assignment).parent, f"assignments/{assignment}")
@@ -78,16 +79,27 @@ def build_bundle(assignment: str, out: Path | None = None) -> Path:
 
 
 def run(assignment: str, root: Path) -> int:
-    """Grade the one submission under ``root/submission`` into ``root/results/results.json``."""
+    """Grade the one submission under ``root/submission`` into ``root/results/results.json``.
+
+    When the grader itself fails, no ``results.json`` is written and the exit status is non-zero:
+    Gradescope then shows "The autograder failed to execute correctly" (and the student may
+    resubmit), never a score of 0 for a fault that is not theirs.
+    """
     from autograder.batch import choose_notebook
     from autograder.grader import Grader
     from autograder.report import gradescope_results
+    from autograder.results import GraderError
 
     results = root / "results" / "results.json"
     results.parent.mkdir(parents=True, exist_ok=True)
+    results.unlink(missing_ok=True)
     entry = choose_notebook("submission", sorted((root / "submission").rglob("*.ipynb")), assignment,
                             course.stub_names(assignment))
-    grader = Grader(assignment, hidden=[root / "submission", root / "results"])
+    try:
+        grader = Grader(assignment)
+    except GraderError as err:
+        print(f"the autograder failed (not the submission's fault): {err}", file=sys.stderr)
+        return 1
     try:
         if entry.notebook is None:
             result = grader.ungradable("submission", entry.problem)
@@ -97,6 +109,9 @@ def run(assignment: str, root: Path) -> int:
                 result.notes.insert(0, entry.note)
     finally:
         grader.close()
+    if not result.has_score:
+        print(f"the autograder failed (not the submission's fault): {result.error}", file=sys.stderr)
+        return 1
     tmp = results.with_suffix(".tmp")
     tmp.write_text(json.dumps(gradescope_results(result), indent=2, ensure_ascii=False))
     os.replace(tmp, results)

@@ -20,11 +20,7 @@ import nbformat
 from autograder import course
 
 LEAK_PATTERNS = re.compile(r"BEGIN SOLUTION|END SOLUTION|BEGIN HIDDEN TESTS|END HIDDEN TESTS|BEGIN MARK SCHEME")
-RELEASE_DIRS = ["assignments", "lectures", "rlcourse", "datasets"]
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".ipynb_checkpoints", "_build", "videos", "*.tmp")
-# Instructor tooling inside the released folders: the scripts that make the data sets fit, among other
-# things, the models students write (a behaviour-cloned reference policy, a Bradley–Terry reward model).
-INSTRUCTOR_ONLY = ["datasets/scripts"]
 
 
 def _nbgrader(*args: str, cwd: Path) -> None:
@@ -64,7 +60,7 @@ def notebook_signature(path: Path) -> list[tuple]:
 def find_leaks(root: Path) -> list[str]:
     """Files under ``root`` that must not be in a student's hands."""
     problems = []
-    for forbidden in ("solutions", "autograder", *INSTRUCTOR_ONLY):
+    for forbidden in ("solutions", "autograder", *course.INSTRUCTOR_ONLY):
         if (root / forbidden).exists():
             problems.append(f"{forbidden}/ is in the release")
     for path in root.rglob("*"):
@@ -114,15 +110,14 @@ def build_student_release(out: Path) -> Path:
     if out.exists() and any(out.iterdir()):
         raise SystemExit(f"{out} exists and is not empty; choose a new folder")
     out.mkdir(parents=True, exist_ok=True)
-    instructor_only = {(course.REPO / path).resolve() for path in INSTRUCTOR_ONLY}
+    shown, masked = course.release_paths(course.REPO)
+    instructor_only = {path.resolve() for path in masked}
 
     def ignore(folder: str, names: list[str]) -> set[str]:
         return set(IGNORE(folder, names)) | {n for n in names if (Path(folder) / n).resolve() in instructor_only}
 
-    for name in RELEASE_DIRS:
-        source = course.REPO / name
-        if source.exists():
-            shutil.copytree(source, out / name, ignore=ignore)
+    for source in shown:
+        shutil.copytree(source, out / source.name, ignore=ignore)
     (out / "README.md").write_text(STUDENT_README)
     (out / "pyproject.toml").write_text(_student_pyproject((course.REPO / "pyproject.toml").read_text()))
     problems = find_leaks(out)

@@ -8,11 +8,10 @@ from __future__ import annotations
 import csv
 import json
 import os
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Iterable
 
-from autograder.grader import GradeResult, StubResult, TestOutcome
+from autograder.results import GradeResult, StubResult, result_to_dict
 
 RESULT_NAME, FEEDBACK_NAME, GRADESCOPE_NAME = "result.json", "feedback.md", "results.json"
 
@@ -94,23 +93,17 @@ def feedback_markdown(result: GradeResult) -> str:
     return "\n".join(out)
 
 
-def result_to_dict(result: GradeResult) -> dict[str, Any]:
-    data = asdict(result)
-    data.update(score=result.score, max_score=result.max_score)
-    return data
-
-
-def result_from_dict(data: dict[str, Any]) -> GradeResult:
-    stubs = [StubResult(s["name"], [TestOutcome(**t) for t in s["tests"]], s.get("note", "")) for s in data["stubs"]]
-    return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
-                       data["notes"], data["error"], data["isolation"], data["seconds"])
-
-
 def write_outputs(result: GradeResult, out_dir: Path) -> None:
     """``results.json`` (Gradescope), ``feedback.md`` and ``result.json`` (the full record) into ``out_dir``.
 
-    The full record is written last: its presence marks the submission as graded.
+    The full record is written last: its presence marks the submission as graded. A grader error
+    writes the record alone (its status says to retry) and removes any score left from before.
     """
+    if not result.has_score:
+        for name in (GRADESCOPE_NAME, FEEDBACK_NAME):
+            (out_dir / name).unlink(missing_ok=True)
+        atomic_write(out_dir / RESULT_NAME, json.dumps(result_to_dict(result), indent=2, ensure_ascii=False))
+        return
     atomic_write(out_dir / GRADESCOPE_NAME, json.dumps(gradescope_results(result), indent=2, ensure_ascii=False))
     atomic_write(out_dir / FEEDBACK_NAME, feedback_markdown(result))
     atomic_write(out_dir / RESULT_NAME, json.dumps(result_to_dict(result), indent=2, ensure_ascii=False))
@@ -118,6 +111,9 @@ def write_outputs(result: GradeResult, out_dir: Path) -> None:
 
 def summary_lines(result: GradeResult) -> list[str]:
     """A short per-stub table for the terminal."""
+    if not result.has_score:
+        return [f"{result.assignment} · {result.submission}: NOT GRADED: the grader failed, no score was given",
+                f"  {result.error}"]
     width = max([len(s.name) for s in result.stubs] + [4])
     lines = [f"{result.assignment} · {result.submission}: {_fmt(result.score)}/{_fmt(result.max_score)}"
              + (f"  (ungradable: {result.error})" if result.error else "")]
@@ -129,15 +125,19 @@ def summary_lines(result: GradeResult) -> list[str]:
 
 
 def write_gradebook(results: Iterable[GradeResult], path: Path) -> None:
-    """The CSV gradebook: one row per submission, ungradable ones included with their reason."""
+    """The CSV gradebook: one row per submission, ungradable ones included with their reason, and grader
+    errors with empty score cells (never a zero: the student was not graded)."""
     results = list(results)
     stubs = list(dict.fromkeys(s.name for r in results for s in r.stubs))
     rows = [["submission", "score", "max_score", "percent", *stubs, "status", "reason"]]
     for r in sorted(results, key=lambda r: r.submission):
+        if not r.has_score:
+            rows.append([r.submission, "", "", "", *[""] * len(stubs), r.status, r.error or ""])
+            continue
         per = {s.name: s.score for s in r.stubs}
         percent = 100 * r.score / r.max_score if r.max_score else 0.0
         rows.append([r.submission, _fmt(r.score), _fmt(r.max_score), f"{percent:.1f}",
-                     *[_fmt(per.get(s, 0)) for s in stubs], "ungradable" if r.error else "graded", r.error or ""])
+                     *[_fmt(per.get(s, 0)) for s in stubs], r.status, r.error or ""])
     tmp = path.with_name(f".{path.name}.tmp")
     path.parent.mkdir(parents=True, exist_ok=True)
     with tmp.open("w", newline="", encoding="utf-8") as f:

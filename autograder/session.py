@@ -1,4 +1,4 @@
-"""The trusted side's view of a submission: cells run in a sandbox, called through proxies.
+"""The trusted side's view of a submission: cells run in a sandbox, called through proxies. Runs in the grader.
 
 A :class:`Session` owns one sandbox worker at a time. It runs the trusted setup
 cells and the submission's stub cells in notebook order, remembers which stubs
@@ -11,11 +11,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Iterable
 
-from autograder.sandbox import Limits, SpawnConfig, WorkerProcess, Zygote
-from autograder.wire import (ChannelClosed, ChannelTimeout, HandleRef, ProtocolError, decode, encode,
-                             send_message)
+from autograder.results import GraderError
+from autograder.sandbox.config import Limits, SpawnConfig
+from autograder.sandbox.wire import (ChannelClosed, ChannelTimeout, HandleRef, LentRef, ProtocolError, decode,
+                                     encode, send_message)
+from autograder.sandbox.worker import NotDefined, Worker
+from autograder.supervisor import SandboxStartError, WorkerProcess, Zygote
+
+START_SECONDS = 30.0
+"""A worker that has not reported ready by then is broken (the grader's fault: no student code ran yet)."""
+KIND_CHARS, ERROR_CHARS, TAIL_QUOTED = 80, 3000, 300
+"""Cuts of what the worker reports: an exception's type name, its message, and the output quoted after a crash."""
+NOT_IMPLEMENTED = "NotImplementedError"
 
 
 class StudentError(Exception):
@@ -25,9 +34,26 @@ class StudentError(Exception):
         super().__init__(message)
         self.kind = kind
 
+    @property
+    def not_implemented(self) -> bool:
+        return self.kind == NOT_IMPLEMENTED
+
+    @property
+    def not_defined(self) -> bool:
+        """The test called a name the notebook does not define (see ``NotDefined`` in the worker)."""
+        return self.kind == NotDefined.__name__
+
 
 class SandboxFailure(Exception):
-    """The worker timed out, died, or sent something malformed."""
+    """The worker died, or sent something malformed, while running student code."""
+
+
+class SandboxTimeout(SandboxFailure):
+    """The worker did not answer in time (an infinite loop, or far too slow)."""
+
+
+class ReferenceFault(GraderError):
+    """The reference solution failed on a test's input: the suite's or the solution's bug, never the student's."""
 
 
 @dataclass
@@ -45,10 +71,41 @@ class CellStatus:
     message: str = ""
 
 
-class Transport(Protocol):
-    generation: int
+@dataclass(frozen=True)
+class Lend:
+    """A trusted object lent to student code (see :func:`autograder.suite.lend`)."""
 
-    def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float | None = None) -> Any: ...
+    obj: Any
+    methods: tuple[str, ...]
+    attrs: tuple[str, ...] = ()
+
+
+class Transport:
+    """What a :class:`Namespace` talks to: requests, handles of one generation, and lent objects."""
+
+    generation = 0
+
+    def __init__(self) -> None:
+        self.lent: dict[int, Lend] = {}
+
+    def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float | None = None) -> Any:
+        raise NotImplementedError
+
+    def reference_of(self, value: Any) -> HandleRef | LentRef:
+        """How a value that is not plain data crosses: a handle goes back, a lent object is registered."""
+        if isinstance(value, Handle):
+            return value._ref()
+        if isinstance(value, Lend):
+            self.lent[len(self.lent) + 1] = value
+            attrs = {name: getattr(value.obj, name) for name in value.attrs}
+            return LentRef(len(self.lent), type(value.obj).__name__, list(value.methods), attrs)
+        raise TypeError(f"cannot send a {type(value).__name__} to the sandbox")
+
+    def call_lent(self, id: int, method: str, args: list, kwargs: dict) -> Any:
+        lent = self.lent.get(id)
+        if lent is None or method not in lent.methods:
+            raise PermissionError(f"`{method}` is not lent")
+        return getattr(lent.obj, method)(*args, **kwargs)
 
 
 class Handle:
@@ -81,17 +138,11 @@ class Handle:
 
 
 def _call(transport: Transport, target: str | int, args: tuple, kwargs: dict, timeout: float | None = None) -> Any:
-    tree_args, blobs = encode(list(args), _handle_ref)
-    tree_kwargs, more = encode(kwargs, _handle_ref)
+    tree_args, blobs = encode(list(args), transport.reference_of)
+    tree_kwargs, more = encode(kwargs, transport.reference_of)
     tree_kwargs = _shift_blobs(tree_kwargs, len(blobs))
     return transport.request({"op": "call", "target": target, "args": tree_args, "kwargs": tree_kwargs},
                              blobs + more, timeout)
-
-
-def _handle_ref(value: Any) -> HandleRef:
-    if isinstance(value, Handle):
-        return value._ref()
-    raise TypeError(f"cannot send a {type(value).__name__} to the sandbox")
 
 
 def _shift_blobs(tree: Any, offset: int) -> Any:
@@ -123,7 +174,7 @@ class Namespace:
         return remote_function
 
     def eval(self, expr: str, timeout: float | None = None, **bindings: Any) -> Any:
-        tree, blobs = encode(bindings, _handle_ref)
+        tree, blobs = encode(bindings, self._transport.reference_of)
         return self._transport.request({"op": "eval", "expr": expr, "bindings": tree}, blobs, timeout)
 
     def defined(self, *names: str) -> list[str]:
@@ -135,47 +186,56 @@ class Namespace:
 
 def _decode_reply(transport: Transport, header: dict[str, Any], blobs: list[bytes]) -> Any:
     if header.get("ok") is not True:
-        raise StudentError(str(header.get("kind", "Error"))[:80], str(header.get("error", "unknown error"))[:3000])
+        raise StudentError(str(header.get("kind", "Error"))[:KIND_CHARS], str(header.get("error", "unknown error"))[:ERROR_CHARS])
     return decode(header.get("value"), blobs,
                   lambda id, type_name: Handle(transport, id, type_name, transport.generation))
 
 
-class LocalTransport:
-    """Runs requests against an in-process namespace (the reference), through the same encoding."""
+class LocalTransport(Transport):
+    """Runs requests against an in-process namespace (the reference), through the same encoding.
 
-    generation = 0
+    Any exception here is the reference's: it becomes a :class:`ReferenceFault`, a grader error.
+    """
 
     def __init__(self, namespace: dict[str, Any]) -> None:
-        from autograder.worker import Worker
-
-        self.worker = Worker()
+        super().__init__()
+        self.worker = Worker(lent_call=self.call_lent)
         self.worker.namespace = namespace
 
     def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float | None = None) -> Any:
-        from autograder.wire import encode as enc
-
-        # Round-trip the request as the worker would receive it, then the answer as the grader would.
-        value = self.worker.run(header, blobs)
-        tree, out = enc(value, self.worker.to_handle)
+        try:
+            value = self.worker.run(header, blobs)
+            tree, out = encode(value, self.worker.to_handle)
+        except Exception as err:  # noqa: BLE001 - whatever the reference raised, it is not the student's fault
+            raise ReferenceFault(f"the reference failed on a hidden test's input ({type(err).__name__}: {err})") from err
         return _decode_reply(self, {"ok": True, "value": tree}, out)
 
 
-class Session:
-    """One submission's sandbox: runs its cells, serves calls, restarts after failures."""
+ReferenceCall = Callable[[str, Any, list[bytes]], tuple[dict, list[bytes]]]
 
-    def __init__(self, zygote: Zygote, cells: list[Cell], hidden_paths: list[str], readonly_paths: list[str],
-                 limits: Limits | None = None):
-        self.zygote, self.cells = zygote, cells
-        self.config = SpawnConfig(hidden_paths, readonly_paths, limits or Limits())
-        self.limits = self.config.limits
-        self.status: dict[str, CellStatus] = {}
+
+class Session(Transport):
+    """One submission's sandbox: runs its cells, serves calls, restarts after failures.
+
+    ``reference_call`` answers the worker's requests to run a reference stub while a test stands
+    it in for the student's own (see ``Worker.reference_stand_in``).
+    """
+
+    def __init__(self, zygote: Zygote, cells: list[Cell], config: SpawnConfig,
+                 reference_call: ReferenceCall | None = None, missing: Iterable[str] = ()) -> None:
+        super().__init__()
+        self.zygote, self.cells, self.config = zygote, cells, config
+        self.limits: Limits = config.limits
+        self.reference_call = reference_call
+        self.status: dict[str, CellStatus] = {
+            name: CellStatus(False, f"no cell defines `{name}` (was its cell deleted, or the function renamed?)")
+            for name in missing}
         self.worker: WorkerProcess | None = None
         self.generation = 0
         self.time_used = 0.0
         self.isolation = "unknown"
         self.restarts = 0
-        self.reference_call: Callable[[str, Any, list[bytes]], tuple[dict, list[bytes]]] | None = None
-        """Answers the worker's requests to run a reference stub (see ``Worker.reference_stand_in``)."""
+        self.standing_in: frozenset[str] = frozenset()
 
     # -------------------------------------------------------------- lifecycle
 
@@ -188,22 +248,23 @@ class Session:
             self.status[cell.label] = self._exec(cell)
 
     def _spawn(self) -> None:
+        """A fresh worker; raises :class:`GraderError` if it cannot start (no student code has run in it)."""
         self.close()
         self.generation += 1
         self.worker = self.zygote.spawn(self.config)
         try:
-            self.worker.start(timeout=30)
-        except (ChannelTimeout, ChannelClosed, ProtocolError, RuntimeError) as err:
+            self.worker.start(timeout=START_SECONDS)
+        except (ChannelTimeout, ChannelClosed, ProtocolError, SandboxStartError) as err:
             self.worker.kill()
-            raise SandboxFailure(f"the sandbox could not start: {err}") from None
+            raise GraderError(f"the sandbox could not start: {err}") from None
         self.isolation = self.worker.isolation
 
-    def _exec(self, cell: CellStatus | Cell) -> CellStatus:
+    def _exec(self, cell: Cell) -> CellStatus:
         try:
             self._raw({"op": "exec", "label": cell.label, "source": cell.source}, [], self.limits.exec_seconds)
             return CellStatus(True)
         except StudentError as err:
-            if err.kind == "NotImplementedError":
+            if err.not_implemented:
                 return CellStatus(False, "not implemented yet: the cell still raises NotImplementedError")
             return CellStatus(False, f"the cell `{cell.label}` failed when run: {err}")
         except SandboxFailure as err:
@@ -236,25 +297,25 @@ class Session:
 
     def _raw(self, header: dict[str, Any], blobs: list[bytes], timeout: float) -> Any:
         if self.time_used > self.limits.submission_seconds:
-            raise SandboxFailure(f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s")
+            raise SandboxTimeout(f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s")
         timeout = min(timeout, self.limits.submission_seconds - self.time_used + 1)
         start = time.monotonic()
         try:
             reply, reply_blobs = self.worker.request(header, blobs, timeout)
-            while "callback" in reply:  # the student's code called a stand-in: run the reference, answer
+            while "callback" in reply:  # the student's code called back into the grader: answer, read on
                 answer, answer_blobs = self._answer(reply, reply_blobs)
                 send_message(self.worker.to_fd, answer, answer_blobs)
                 reply, reply_blobs = self.worker.reader.read_message(max(0.1, start + timeout - time.monotonic()))
             return _decode_reply(self, reply, reply_blobs)
         except ChannelTimeout:
             self.worker.kill()
-            raise SandboxFailure(f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)") from None
+            raise SandboxTimeout(f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)") from None
         except (ChannelClosed, BrokenPipeError, OSError):
             tail = self.worker.tail().strip()
             self.worker.kill()
             raise SandboxFailure("crashed the sandbox (the process exited or was killed: out of memory, "
                                  "os._exit, a signal, or a resource limit)"
-                                 + (f"; its last output: {tail[-300:]}" if tail else "")) from None
+                                 + (f"; its last output: {tail[-TAIL_QUOTED:]}" if tail else "")) from None
         except ProtocolError as err:
             self.worker.kill()
             raise SandboxFailure(f"sent malformed data back to the grader ({err})") from None
@@ -262,12 +323,31 @@ class Session:
             self.time_used += time.monotonic() - start
 
     def _answer(self, reply: dict[str, Any], blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
-        name = reply.get("callback")
-        if self.reference_call is None or name not in self.standing_in:
-            return {"ok": False, "error": f"`{name}` is not available from the grader now"}, []
-        return self.reference_call(str(name), reply.get("args"), blobs)
+        """Answer a callback: a reference stand-in (only for the stubs standing in now) or a lent object's method."""
+        callback = reply.get("callback")
+        if type(callback) is not dict:
+            raise ProtocolError("malformed callback")
+        if "reference" in callback:
+            name = callback["reference"]
+            if self.reference_call is None or name not in self.standing_in:
+                return {"ok": False, "error": f"`{name}` is not available from the grader now"}, []
+            return self.reference_call(str(name), reply.get("args"), blobs)
+        if "lent" in callback:
+            return self._answer_lent(callback.get("lent"), str(callback.get("method")), reply.get("args"), blobs)
+        raise ProtocolError("unknown callback")
 
-    standing_in: frozenset[str] = frozenset()
+    def _answer_lent(self, id: Any, method: str, tree: Any, blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
+        def refuse(id: int, type_name: str) -> Any:
+            raise ProtocolError("objects cannot be sent to a lent object")
+
+        try:
+            args, kwargs = decode(tree, blobs, refuse)
+            out_tree, out_blobs = encode(self.call_lent(id, method, args, kwargs))
+            return {"ok": True, "value": out_tree}, out_blobs
+        except ProtocolError:
+            raise
+        except Exception as err:  # noqa: BLE001 - bad arguments from student code: its exception, not the grader's
+            return {"ok": False, "error": f"{type(err).__name__}: {str(err)[:TAIL_QUOTED]}"}, []
 
     def stand_in(self, names: list[str]) -> None:
         """Replace these stubs by reference stand-ins in the worker (for the test about to run)."""

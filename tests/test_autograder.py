@@ -6,7 +6,7 @@ import json
 import pytest
 
 from autograder.grader import Grader
-from autograder.report import feedback_markdown, gradescope_results
+from autograder.report import feedback_markdown
 from conftest import REPO, with_cells
 
 SOLVED = {
@@ -26,13 +26,6 @@ def fx_grader():
         grader = Grader("fx")  # the grader keeps its course's paths from here on
     finally:
         course.REPO = saved
-    yield grader
-    grader.close()
-
-
-@pytest.fixture(scope="module")
-def hw0_grader():
-    grader = Grader("hw0_setup")
     yield grader
     grader.close()
 
@@ -77,16 +70,6 @@ def test_a_wrong_answer_fails_with_a_message_and_hint(fx_grader, tmp_path):
     assert failed and "shape" in failed[0].message and failed[0].hint == "Sum over the last axis, then scale."
     text = feedback_markdown(result)
     assert "✗" in text and "hint" in text and "q_why" in text  # the manual cell is listed with its points
-
-
-def test_gradescope_results_have_one_test_per_stub(hw0_grader):
-    result = hw0_grader.grade(REPO / "autograder/samples/hw0_setup/partial.ipynb")
-    data = json.loads(json.dumps(gradescope_results(result)))
-    assert [t["name"] for t in data["tests"]] == ["discounted_returns", "episode_returns"]
-    assert data["score"] == sum(t["score"] for t in data["tests"]) == 5
-    assert {"score", "max_score", "status", "output", "visibility"} <= set(data["tests"][0])
-    assert data["tests"][1]["status"] == "failed" and "not implemented" in data["tests"][1]["output"]
-    assert "execution_time" in data
 
 
 @pytest.mark.parametrize("broken", [

@@ -10,7 +10,25 @@ import zipfile
 from pathlib import Path
 
 from autograder.gradescope import build_bundle
+from autograder.grader import Grader
+from autograder.report import gradescope_results
 from conftest import REPO
+
+
+def test_gradescope_results_have_one_test_per_stub():
+    grader = Grader("hw0_setup")
+    try:
+        result = grader.grade(REPO / "autograder/samples/hw0_setup/partial.ipynb")
+    finally:
+        grader.close()
+    data = json.loads(json.dumps(gradescope_results(result)))
+    assert [t["name"] for t in data["tests"]] == ["discounted_returns", "episode_returns"]
+    assert data["score"] == sum(t["score"] for t in data["tests"]) == 5
+    assert {"score", "max_score", "status", "output", "visibility"} <= set(data["tests"][0])
+    assert data["tests"][1]["status"] == "failed" and "not implemented" in data["tests"][1]["output"]
+    assert "execution_time" in data
+
+
 
 
 def test_bundle_grades_a_submission_in_a_gradescope_layout(tmp_path):

@@ -71,6 +71,6 @@ def test_student_release_is_clean_and_hw0_runs_there(tmp_path):
 def test_a_solution_file_in_the_release_is_refused(tmp_path, monkeypatch):
     import autograder.release as release
 
-    monkeypatch.setattr(release, "RELEASE_DIRS", release.RELEASE_DIRS + ["solutions"])
+    monkeypatch.setattr(release.course, "STUDENT_RELEASE", (*release.course.STUDENT_RELEASE, "solutions"))
     with pytest.raises(SystemExit, match="leak"):
         build_student_release(tmp_path / "bad")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from autograder.wire import (FrameReader, HandleRef, ProtocolError, decode, encode, send_message)
+from autograder.sandbox.wire import (FrameReader, HandleRef, ProtocolError, decode, encode, send_message)
 
 
 def roundtrip(value, to_handle=None):

@@ -4,8 +4,10 @@ A message is one frame of UTF-8 JSON followed by the frames of its binary
 blobs; every frame is a 4-byte big-endian length and its bytes. Values are a
 small closed set: ``None``, ``bool``, ``int``, ``float``, ``str``, lists,
 tuples, string-keyed dicts, numpy arrays and scalars (as ``.npy`` with
-``allow_pickle=False``), torch tensors (as ``.npy``) and *handles* to objects
-that stay inside the worker. Decoding builds only those types, so nothing a
+``allow_pickle=False``), torch tensors (as ``.npy``), *handles* to objects
+that stay inside the worker, and *lent* objects: trusted objects that stay in
+the grader (an environment whose hidden parameters a stub must learn), whose
+named methods the worker calls back through the channel. Decoding builds only those types, so nothing a
 student sends can run code or masquerade as another type on the trusted side:
 an object whose ``__eq__`` always returns True never leaves the worker.
 There is no pickle anywhere in this module.
@@ -25,6 +27,11 @@ import numpy as np
 MAX_FRAME = 256 * 1024 * 1024
 """No single frame may exceed this (a value of 256 MB is far beyond any test)."""
 
+MAX_DEPTH = 64
+"""Values nest at most this deep: far beyond any test's data, and well inside Python's recursion limit
+on both sides (a student's value nested 10,000 deep must fail cleanly, not crash the grader)."""
+MAX_BLOBS = 10_000
+"""Arrays in one message at most."""
 ALLOWED_DTYPE_KINDS = set("biufc")
 
 
@@ -52,6 +59,16 @@ class HandleRef:
         return f"<{self.type_name} in the sandbox #{self.id}>"
 
 
+class LentRef:
+    """A trusted object lent to the worker: its ``id`` in the grader, the ``methods`` the worker may call,
+    and ``attrs``, plain values copied when it was sent (``n_arms``, say)."""
+
+    __slots__ = ("id", "type_name", "methods", "attrs")
+
+    def __init__(self, id: int, type_name: str, methods: list[str], attrs: dict[str, Any]) -> None:
+        self.id, self.type_name, self.methods, self.attrs = int(id), str(type_name)[:100], list(methods), dict(attrs)
+
+
 def _npy_bytes(array: np.ndarray) -> bytes:
     buffer = io.BytesIO()
     np.save(buffer, array, allow_pickle=False)
@@ -73,7 +90,7 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
     blobs: list[bytes] = []
 
     def enc(v: Any, d: int) -> Any:
-        if d > 64:
+        if d > MAX_DEPTH:
             raise ValueError("value nested too deeply")
         if v is None or type(v) in (bool, str):
             return v
@@ -95,6 +112,9 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
             return {"$npscalar": len(blobs) - 1}
         if type(v) is HandleRef:
             return {"$handle": v.id}
+        if type(v) is LentRef:
+            return {"$lent": {"id": v.id, "type": v.type_name, "methods": [str(m) for m in v.methods],
+                              "attrs": enc(v.attrs, d + 1)}}
         if _is_plain_tensor(v):
             blobs.append(_npy_bytes(v.detach().cpu().resolve_conj().resolve_neg().numpy()))
             return {"$tensor": len(blobs) - 1}
@@ -110,8 +130,13 @@ def _is_plain_tensor(v: Any) -> bool:
     return torch is not None and type(v) is torch.Tensor and v.layout == torch.strided
 
 
-def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]) -> Any:
-    """Rebuild a value from :func:`encode`'s output; anything unexpected raises :class:`ProtocolError`."""
+def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any],
+           from_lent: Callable[[LentRef], Any] | None = None) -> Any:
+    """Rebuild a value from :func:`encode`'s output; anything unexpected raises :class:`ProtocolError`.
+
+    Lent objects are accepted only where ``from_lent`` is given (in the worker): the grader never
+    takes one from the sandbox.
+    """
 
     def blob(i: Any) -> bytes:
         if type(i) is not int or not 0 <= i < len(blobs):
@@ -119,7 +144,7 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
         return blobs[i]
 
     def dec(t: Any, d: int) -> Any:
-        if d > 66:
+        if d > MAX_DEPTH + 2:  # the wrappers of a value at MAX_DEPTH
             raise ProtocolError("value nested too deeply")
         if t is None or type(t) in (bool, int, float, str):
             return t
@@ -150,6 +175,11 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
             import torch
 
             return torch.from_numpy(_npy_array(blob(body)).copy())
+        if tag == "$lent" and from_lent is not None and not rest and type(body) is dict:
+            methods, attrs = body.get("methods"), dec(body.get("attrs"), d + 1)
+            if type(body.get("id")) is not int or type(methods) is not list or type(attrs) is not dict:
+                raise ProtocolError("malformed lent object")
+            return from_lent(LentRef(body["id"], str(body.get("type", "object")), [str(m) for m in methods], attrs))
         if tag == "$handle" and type(body) is int:
             type_name = rest[0][1] if rest and rest[0][0] == "type" and type(rest[0][1]) is str else "object"
             return from_handle(body, type_name)
@@ -208,6 +238,6 @@ class FrameReader:
             header = json.loads(self._frame(deadline).decode())
         except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
             raise ProtocolError("message header is not JSON") from None
-        if type(header) is not dict or type(header.get("nblobs")) is not int or not 0 <= header["nblobs"] < 10_000:
+        if type(header) is not dict or type(header.get("nblobs")) is not int or not 0 <= header["nblobs"] < MAX_BLOBS:
             raise ProtocolError("message header is malformed")
         return header, [self._frame(deadline) for _ in range(header["nblobs"])]

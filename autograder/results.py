@@ -1,0 +1,88 @@
+"""What grading produces, for every part of the kit that reads it: per-test outcomes, per-stub scores,
+one submission's result and its status, and the error that means the grader itself failed.
+
+A result has one of three statuses:
+
+- ``graded``: the hidden suite ran; each stub has its score;
+- ``ungradable``: the submission itself cannot be graded (not a notebook, no notebook in the
+  folder): listed with its reason and zero, since the fault is the submission's;
+- ``grader_error``: the grader failed (the sandbox could not start, the reference could not be
+  built, the suite could not run). Such a result carries no score at all: it is never a grade,
+  and a batch retries it on its next run.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+GRADED, UNGRADABLE, GRADER_ERROR = "graded", "ungradable", "grader_error"
+
+
+class GraderError(RuntimeError):
+    """The grader itself failed; no student may receive a score for this run."""
+
+
+@dataclass
+class TestOutcome:
+    name: str
+    stub: str
+    points: float
+    passed: bool
+    message: str = ""
+    hint: str | None = None
+    seconds: float = 0.0
+
+
+@dataclass
+class StubResult:
+    name: str
+    tests: list[TestOutcome] = field(default_factory=list)
+    note: str = ""
+
+    @property
+    def score(self) -> float:
+        return sum(t.points for t in self.tests if t.passed)
+
+    @property
+    def max_score(self) -> float:
+        return sum(t.points for t in self.tests)
+
+
+@dataclass
+class GradeResult:
+    assignment: str
+    submission: str
+    stubs: list[StubResult]
+    manual: list[tuple[str, float]]
+    notes: list[str] = field(default_factory=list)
+    error: str | None = None
+    isolation: str = "unknown"
+    seconds: float = 0.0
+    status: str = GRADED
+
+    @property
+    def score(self) -> float:
+        return sum(s.score for s in self.stubs)
+
+    @property
+    def max_score(self) -> float:
+        return sum(s.max_score for s in self.stubs)
+
+    @property
+    def has_score(self) -> bool:
+        """False for a grader error: such a result must never be shown or recorded as a grade."""
+        return self.status != GRADER_ERROR
+
+
+def result_to_dict(result: GradeResult) -> dict[str, Any]:
+    data = asdict(result)
+    if result.has_score:
+        data.update(score=result.score, max_score=result.max_score)
+    return data
+
+
+def result_from_dict(data: dict[str, Any]) -> GradeResult:
+    stubs = [StubResult(s["name"], [TestOutcome(**t) for t in s["tests"]], s.get("note", "")) for s in data["stubs"]]
+    status = data.get("status", UNGRADABLE if data["error"] else GRADED)
+    return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
+                       data["notes"], data["error"], data["isolation"], data["seconds"], status)

@@ -1,0 +1,53 @@
+"""What the grader tells the zygote about one worker: its limits and its file-system view.
+
+Plain data, sent as JSON over the zygote's socket; used by both sides.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class Limits:
+    """Resource limits of one worker; ``call_seconds``, ``exec_seconds`` and ``submission_seconds`` are
+    deadlines the grader enforces, the rest are kernel limits set in the worker."""
+
+    call_seconds: float = 20.0
+    exec_seconds: float = 60.0
+    submission_seconds: float = 600.0
+    memory_bytes: int = 4 * 1024**3
+    cpu_seconds: int = 900
+    processes: int = 64
+    file_bytes: int = 16 * 1024**2
+    tmp_bytes: int = 64 * 1024**2
+    open_files: int = 256
+
+
+@dataclass
+class View:
+    """The worker's whole file system: an allowlist, built fresh for each worker.
+
+    ``expose`` are paths (folders or files) shown read-only at the same place; ``mask`` are paths
+    inside them shown as empty (instructor tools inside a released folder). Nothing else of the
+    machine exists in the view but ``/proc``, a few devices and a private ``/tmp``. The worker
+    reads files with the file-system identity ``read_as`` (uid, gid): the owner of the course
+    checkout, so that a checkout of mode 700 and files of mode 600 stay readable without being
+    widened for anyone else.
+    """
+
+    expose: list[str] = field(default_factory=list)
+    mask: list[str] = field(default_factory=list)
+    read_as: tuple[int, int] = (0, 0)
+
+
+@dataclass
+class SpawnConfig:
+    """What the zygote needs to start one worker."""
+
+    view: View = field(default_factory=View)
+    limits: Limits = field(default_factory=Limits)
+
+    @classmethod
+    def from_json(cls, raw: dict) -> "SpawnConfig":
+        view = raw["view"]
+        return cls(View(list(view["expose"]), list(view["mask"]), tuple(view["read_as"])), Limits(**raw["limits"]))

@@ -1,0 +1,122 @@
+"""The zygote and the launcher. Runs in the sandbox's own processes, never in the grader.
+
+The grader forks the zygote first thing (see :mod:`autograder.supervisor`), before it has built
+any reference namespace or loaded any suite, so nothing secret is in the memory every worker
+inherits. The zygote imports the assignment's libraries once (torch, gymnasium, ... take over a
+second) and then, for each request on its socket, forks a *launcher*, which enters new namespaces
+and forks the *worker* (PID 1 of its namespace). The worker isolates itself
+(:mod:`autograder.sandbox.isolation`) and serves requests (:mod:`autograder.sandbox.worker`).
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import sys
+
+from autograder.sandbox import isolation
+from autograder.sandbox.config import SpawnConfig
+from autograder.sandbox.wire import send_message
+from autograder.sandbox.worker import serve
+
+WORKER_UID_BASE, WORKER_UID_SPAN = 20000, 40000
+"""As root, each live worker runs as a uid of its own from this range (so workers cannot signal each other)."""
+MAX_REQUEST_BYTES = 1 << 20
+"""A spawn request (its JSON config) is far smaller than this."""
+SAFE_ENV = {"PATH", "LANG", "MUJOCO_GL", "PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+            "OPENBLAS_NUM_THREADS", "OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "VIRTUAL_ENV"}
+"""The only environment variables a worker keeps (with ``LC_*`` and ``PYTHON*``): no tokens, no paths of the grader's."""
+WORKDIR = "/tmp/work"
+
+
+def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, existing: int) -> None:
+    """[worker] Isolate, then serve; never returns. Any failure before serving is reported, then the worker dies."""
+    to_worker, from_worker, output = fds
+    try:
+        if level != "none":
+            isolation.build_view(config.view, config.limits.tmp_bytes)
+        own_uid = uid if level == "full" else None
+        os.makedirs(WORKDIR, exist_ok=True)
+        if own_uid is not None:
+            os.chown(WORKDIR, own_uid, own_uid)
+        os.chdir(WORKDIR)
+        keep = {k: v for k, v in os.environ.items() if k in SAFE_ENV or k.startswith(("LC_", "PYTHON"))}
+        os.environ.clear()
+        os.environ.update(keep, HOME=WORKDIR, TMPDIR=WORKDIR, MPLCONFIGDIR=WORKDIR, MPLBACKEND="Agg")
+        os.dup2(output, 1)
+        os.dup2(output, 2)
+        devnull = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(devnull, 0)
+        isolation.close_fds_except([to_worker, from_worker])
+        # Whatever the grader's own streams were (pytest replaces them), the student's go to the pipe.
+        sys.stdin = open(0, "r", closefd=False)
+        sys.stdout = open(1, "w", buffering=1, encoding="utf-8", errors="replace", closefd=False)
+        sys.stderr = open(2, "w", buffering=1, encoding="utf-8", errors="replace", closefd=False)
+        # RLIMIT_NPROC counts every process of the real uid: a worker's own uid starts at zero,
+        # while a normal user's grader shares its uid with everything else that user runs.
+        isolation.set_limits(config.limits, config.limits.processes + (0 if own_uid is not None else existing))
+        if level != "none":
+            isolation.drop_privileges(own_uid, config.view.read_as)
+    except BaseException as err:  # noqa: BLE001 - report any set-up failure, then die
+        try:
+            send_message(from_worker, {"ok": False, "kind": "SandboxError", "error": f"sandbox set-up failed: {err}"})
+        except OSError:
+            pass
+        os._exit(0)
+    serve(to_worker, from_worker)
+    os._exit(0)
+
+
+def _launch(config: SpawnConfig, fds: list[int]) -> None:
+    """[launcher] Enter namespaces, fork the worker, report its pid, wait for it; never returns."""
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+    os.setsid()
+    level = isolation.enter_namespaces()
+    uid = WORKER_UID_BASE + os.getpid() % WORKER_UID_SPAN
+    existing = isolation.processes_of(os.getuid())  # counted before the worker's /proc shows only its own namespace
+    sync_r, sync_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(sync_w)
+        os.read(sync_r, 1)
+        os.close(sync_r)
+        _boot_worker(config, fds, level, uid, existing)
+    os.close(sync_r)
+    send_message(fds[1], {"ok": True, "pid": pid, "pgid": os.getpgid(0), "isolation": level})
+    os.write(sync_w, b"go")
+    os.close(sync_w)
+    for fd in fds:
+        os.close(fd)
+    try:
+        os.waitpid(pid, 0)
+    except ChildProcessError:
+        pass
+    os._exit(0)
+
+
+def main(sock: socket.socket, preload: list[str]) -> None:
+    """[zygote] Pre-import ``preload``, then fork a launcher per request on ``sock``; never returns."""
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # children are reaped automatically
+    isolation._libc.prctl(isolation.PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # die with the grader
+    os.environ.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg")
+    for module in preload:
+        try:
+            __import__(module)
+        except Exception:  # noqa: BLE001 - a module that fails here fails again, visibly, in the worker
+            pass
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
+    while True:
+        try:
+            message, fds, _, _ = socket.recv_fds(sock, MAX_REQUEST_BYTES, 3)
+        except OSError:
+            os._exit(0)
+        if not message:
+            os._exit(0)
+        config = SpawnConfig.from_json(json.loads(message))
+        if os.fork() == 0:
+            sock.close()
+            _launch(config, list(fds))
+        for fd in fds:
+            os.close(fd)
