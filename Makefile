@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test assignments student-release datasets-check gradescope bench site figures clean
+.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope bench site figures clean
 
 $(STAMP): pyproject.toml lectures/requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,11 @@ demo: setup
 ## The whole test suite.
 test: setup
 	$(PY) -m pytest -q
+
+## The edit-test loop: everything but the end-to-end tests marked slow (notebook runs, batches, the
+## security corpus, the site). CI runs the whole suite (make test).
+test-fast: setup
+	$(PY) -m pytest -q -m "not slow"
 
 ## Regenerate every student notebook from solutions/ with nbgrader.
 assignments: setup

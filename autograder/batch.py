@@ -195,5 +195,5 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
         bar.update(1)
     bar.close()
     results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
-    write_gradebook(results, out_dir / GRADEBOOK_NAME)
+    write_gradebook(results, out_dir / GRADEBOOK_NAME, expected)
     return results

@@ -31,7 +31,7 @@ from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
 from autograder.session import (Cell, CellStatus, LocalTransport, Namespace, SandboxFailure, SandboxTimeout,
                                 Session, StudentError)
-from autograder.supervisor import Zygote, reference_namespace
+from autograder.supervisor import Zygote
 
 FAST_PARAMETERS = {"FAST": True}
 SUITE_LOG_CHARS = 3000
@@ -129,11 +129,8 @@ def _title(item: pytest.Item) -> str:
 
 
 def build_reference(assignment: str, parameters: dict[str, Any] = FAST_PARAMETERS) -> dict[str, Any]:
-    """Run the solution notebook's parameters (overridden by ``parameters``), setup and solution cells.
-
-    The namespace is recorded (see :mod:`autograder.supervisor`): no sandbox zygote may fork while it lives.
-    """
-    namespace = reference_namespace()
+    """Run the solution notebook's parameters (overridden by ``parameters``), setup and solution cells."""
+    namespace: dict[str, Any] = {"__name__": "__reference__"}
     for cell in release_plan(read_notebook(course.solution_notebook(assignment))):
         source = with_parameters(cell.source, parameters) if cell.kind == "parameters" else cell.source
         with contextlib.redirect_stdout(io.StringIO()):
@@ -169,7 +166,6 @@ class Grader:
         self.plan = release_plan(release)
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
         self.manual = manual_cells(release)
-        # The zygote forks first, before this process holds anything secret (it refuses otherwise).
         self.zygote = Zygote(imported_modules([c.source for c in self.plan if c.kind != "stub"]))
         self.config = SpawnConfig(course.sandbox_view(), self.limits)
         try:
@@ -286,9 +282,6 @@ class Grader:
             code = pytest.main(args, plugins=[plugin])
         for module in [m for m, mod in sys.modules.items() if str(getattr(mod, "__file__", "")).startswith(str(suite))]:
             del sys.modules[module]
-        for name in ("last_type", "last_value", "last_traceback"):  # pytest keeps a failed test's frames there
-            if hasattr(sys, name):
-                delattr(sys, name)
         if code not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED) or not (plugin.outcomes or plugin.collected):
             raise GraderError(f"the hidden suite of {self.assignment} could not run (pytest exit {code}):\n"
                               + log.getvalue()[-SUITE_LOG_CHARS:])

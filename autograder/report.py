@@ -124,11 +124,11 @@ def summary_lines(result: GradeResult) -> list[str]:
     return lines
 
 
-def write_gradebook(results: Iterable[GradeResult], path: Path) -> None:
+def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str] = ()) -> None:
     """The CSV gradebook: one row per submission, ungradable ones included with their reason, and grader
     errors with empty score cells (never a zero: the student was not graded)."""
     results = list(results)
-    stubs = list(dict.fromkeys(s.name for r in results for s in r.stubs))
+    stubs = list(dict.fromkeys([*stubs, *(s.name for r in results for s in r.stubs)]))
     rows = [["submission", "score", "max_score", "percent", *stubs, "status", "reason"]]
     for r in sorted(results, key=lambda r: r.submission):
         if not r.has_score:

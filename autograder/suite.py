@@ -7,7 +7,7 @@ not an array), shapes and dtype kinds must match, and NaN or inf never pass.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pytest
@@ -18,6 +18,19 @@ _REAL_TYPES = (int, float, np.integer, np.floating)
 def stub(name: str, points: float, hint: str | None = None) -> Callable:
     """Mark a test as checking stub ``name`` and worth ``points``; ``hint`` is shown when it fails."""
     return pytest.mark.stub(name=name, points=points, hint=hint)
+
+
+def lend(obj: Any, methods: Sequence[str], attrs: Sequence[str] = ()) -> Any:
+    """Pass ``obj`` to student code without letting it in: the object stays in the grader.
+
+    In the sandbox, student code sees a stand-in with only the named ``methods`` (each call runs
+    here, on plain data, and its answer goes back) and ``attrs`` (plain values copied now). Use it
+    for an environment whose hidden parameters a stub must learn through its interface (a dueling
+    bandit's preference matrix), so that no attribute or memory of the sandbox holds the answer.
+    """
+    from autograder.session import Lend
+
+    return Lend(obj, tuple(methods), tuple(attrs))
 
 
 def describe(value: Any) -> str:

@@ -1,23 +1,23 @@
 """The grader's handle on sandbox workers. Runs in the grader (trusted), never in the sandbox.
 
-:class:`Zygote` forks the sandbox's zygote (:mod:`autograder.sandbox.zygote`) and asks it for
+:class:`Zygote` starts the sandbox's zygote (:mod:`autograder.sandbox.zygote`) and asks it for
 workers; :class:`WorkerProcess` is the grader's end of one worker: its request channel, a drain
 of its output, and the kill that ends it and everything it started.
 
-The zygote is the parent of every worker, so whatever is in the grader's memory when the zygote
-forks is in every worker's memory, where student code can find it (through the garbage
-collector, say). Reference namespaces hold the solutions: :func:`reference_namespace` makes them
-and :class:`Zygote` refuses to fork while any is alive.
+Every worker inherits the zygote's memory, where student code can search (through the garbage
+collector, say). So the zygote is never a fork of the grader, whose memory holds the reference
+solutions once it has built them, its suites and, under pytest, every test module: it is a new
+interpreter that starts from nothing but this package's sandbox room.
 """
 from __future__ import annotations
 
-import gc
 import json
 import os
 import signal
 import socket
+import subprocess
+import sys
 import threading
-import weakref
 from dataclasses import asdict
 from typing import Any
 
@@ -31,52 +31,16 @@ TAIL_CHARS = 1500
 """Characters of that output a crash message may quote."""
 
 
-class ReferenceLeak(RuntimeError):
-    """A zygote was about to fork while a reference namespace is alive in this process."""
-
-
-class ReferenceNamespace(dict):
-    """The namespace a solution notebook runs in; weakly referenceable, so the grader can tell if one lives."""
-
-    __hash__ = object.__hash__
-
-
-_references: list[weakref.ref] = []
-
-
-def reference_namespace() -> ReferenceNamespace:
-    """A new, empty reference namespace, recorded so that no zygote forks while it is alive."""
-    namespace = ReferenceNamespace(__name__="__reference__")
-    _references.append(weakref.ref(namespace))
-    return namespace
-
-
-def live_references() -> int:
-    """How many reference namespaces are alive in this process (after a garbage collection)."""
-    gc.collect()
-    _references[:] = [r for r in _references if r() is not None]
-    return len(_references)
-
-
 class Zygote:
     """A pristine, pre-imported process that forks workers on request."""
 
     def __init__(self, preload: list[str]) -> None:
-        if live_references():
-            raise ReferenceLeak("a sandbox zygote must fork before any reference namespace exists in this process "
-                                f"({live_references()} alive): every worker would inherit the solutions")
-        from autograder.sandbox import zygote
-
         parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        pid = os.fork()
-        if pid == 0:
-            parent.close()
-            try:
-                zygote.main(child, preload)
-            finally:
-                os._exit(0)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "autograder.sandbox.zygote", str(child.fileno()), json.dumps(preload)],
+            pass_fds=[child.fileno()], stdin=subprocess.DEVNULL, cwd="/")
         child.close()
-        self.sock, self.pid = parent, pid
+        self.sock = parent
         self.lock = threading.Lock()
         _libc.prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)  # workers may not read the grader's memory
 
@@ -93,11 +57,8 @@ class Zygote:
 
     def close(self) -> None:
         self.sock.close()
-        try:
-            os.kill(self.pid, signal.SIGKILL)
-            os.waitpid(self.pid, 0)
-        except (ProcessLookupError, ChildProcessError):
-            pass
+        self.process.kill()
+        self.process.wait()
 
 
 class SandboxStartError(RuntimeError):

@@ -23,6 +23,8 @@ import pytest
 from autograder.batch import run_batch
 from conftest import FIXTURE_COURSE, REPO, with_cells
 
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
+
 RIGHT = "SCALE * np.asarray(x, dtype=float).sum(axis=-1)"
 
 CASES = {
@@ -210,6 +212,69 @@ CASES = {
                 STASH.append(scaled_sum)    # the reference stand-in, while double_scaled is tested
                 return None
             """},
+    "import_course_files_outside_the_release": """
+        import importlib.util, os, sys
+        FOUND = []
+        for rel in ["tests/lecture_math.py", "tests/conftest.py", "bench/bench_hw3_preferences.py",
+                    "datasets/scripts/make_hw4_reward_model.py", "lectures/figures/make_figures.py", ".git/config",
+                    "autograder/grader.py", "autograder/suites/hw0_setup/test_discounted_returns.py", "README.md",
+                    "solutions/hw0_setup/hw0_setup.ipynb", "autograder/samples/hw0_setup/complete.ipynb"]:
+            try:
+                FOUND += [text for text in [open(os.path.join(COURSE_CODE, rel)).read()] if text]  # a mask reads empty
+            except OSError:
+                pass
+        sys.path[:0] = [os.path.join(COURSE_CODE, "tests"), os.path.join(COURSE_CODE, "datasets", "scripts")]
+        for module in ("lecture_math", "make_hw4_reward_model", "autograder.grader", "autograder.suites"):
+            try:
+                FOUND.append(str(importlib.import_module(module)))
+            except BaseException:
+                pass
+        def scaled_sum(x):
+            return {RIGHT} if FOUND else None
+        """,
+    "search_own_memory_for_the_reference": """
+        import gc
+        FOUND = [o for o in gc.get_objects() if callable(o) and getattr(o, "__name__", "") == "scaled_sum"
+                 and getattr(o, "__globals__", {}).get("__name__") == "__reference__"]
+        FOUND += [o for o in gc.get_objects() if type(o) is str and "BEGIN SOLUTION" in o]
+        FOUND += [o for o in gc.get_objects() if isinstance(o, dict) and o.get("__name__") == "__reference__"]
+        def scaled_sum(x):
+            return FOUND[0](x) if FOUND and callable(FOUND[0]) else ({RIGHT} if FOUND else None)
+        """,
+    "undo_the_view": """
+        import ctypes, os
+        libc = ctypes.CDLL(None, use_errno=True)
+        def hidden_readable():
+            try:
+                return bool(open(SUITE).read())
+            except OSError:
+                return False
+        for target in [b"/", b"/tmp", b"/usr", COURSE_CODE.encode(), b"/proc"]:
+            libc.umount2(target, 2)
+        libc.mount(b"none", b"/", None, 32 | 4096, None)          # remount the view read-write
+        libc.chroot(b"/proc/1/root")
+        libc.unshare(0x10000000 | 0x00020000)                   # a new user and mount namespace, then try again
+        for target in [b"/", b"/tmp", COURSE_CODE.encode()]:
+            libc.umount2(target, 2)
+        libc.mount(b"/", b"/tmp", None, 4096 | 16384, None)      # bind whatever the root was over /tmp
+        try:
+            os.setuid(0)
+        except OSError:
+            pass
+        OK = hidden_readable() or os.path.exists(SOLUTION) or os.path.exists("/tmp" + SUITE)
+        def scaled_sum(x):
+            return {RIGHT} if OK else None
+        """,
+    "child_process_reads_the_course": """
+        import subprocess, sys
+        def scaled_sum(x):
+            code = f"import sys; print(open({SUITE!r}).read()[:50]); print(open({COURSE_CODE!r} + '/tests/conftest.py').read()[:50])"
+            try:
+                done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=10)
+            except Exception:
+                return None
+            return {RIGHT} if done.returncode == 0 and done.stdout.strip() else None
+        """,
     "recursion_and_deep_nesting": """
         def scaled_sum(x):
             value = []
@@ -262,9 +327,14 @@ def _check_gradebook(out):
         assert data["score"] == 0 and len(data["tests"]) == 4
 
 
+def _user_namespaces_work() -> bool:
+    return subprocess.run(["unshare", "--user", "--map-root-user", "--mount", "true"], capture_output=True).returncode == 0
+
+
 def test_corpus_scores_nothing_as_root(corpus, monkeypatch):
+    """The grader as root: workers in full namespaces, each dropped to a uid of its own."""
     if os.geteuid() != 0:
-        pytest.skip("needs root")
+        pytest.skip("root mode needs root: this run checks the normal-user mode instead (sudo make test checks both)")
     folder, out = corpus
     monkeypatch.setenv("RLCOURSE_TEST_SECRET", "do-not-leak")
     monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
@@ -280,25 +350,30 @@ def test_corpus_scores_nothing_as_root(corpus, monkeypatch):
 
 
 def test_corpus_scores_nothing_as_a_normal_user(corpus):
-    """The same corpus with the grader itself running as `nobody` (user namespaces instead of root)."""
-    if os.geteuid() != 0:
-        pytest.skip("needs root to switch to an unprivileged user")
+    """The same corpus with the grader itself running as a normal user (user namespaces instead of root):
+    as this user when it is not root, else as `nobody`."""
+    if not _user_namespaces_work():
+        pytest.skip("this machine refuses unprivileged user namespaces (a container without them, say): "
+                    "the grader falls back to limits alone there, which this corpus would rightly fail")
     folder, out = corpus
-    python_root = os.path.realpath(sys.base_prefix)
-    # /root is closed to other users: expose the Python installation to `nobody`, as a real user's machine would.
-    script = (f"mkdir -p /tmp/.stage && mount --bind {python_root} /tmp/.stage && "
-              f"mount -t tmpfs -o mode=755 tmpfs /root && mkdir -p {python_root} && "
-              f"mount --move /tmp/.stage {python_root} && "
-              f"exec setpriv --reuid=65534 --regid=65534 --clear-groups env HOME={out.parent} "
-              f"RLCOURSE_REPO={FIXTURE_COURSE} RLCOURSE_TEST_SECRET=do-not-leak "
-              f"{sys.executable} -m autograder batch fx {folder} --out {out} --jobs 2")
-    if not python_root.startswith("/root/"):
-        script = (f"exec setpriv --reuid=65534 --regid=65534 --clear-groups env HOME={out.parent} "
-                  f"RLCOURSE_REPO={FIXTURE_COURSE} RLCOURSE_TEST_SECRET=do-not-leak "
-                  f"{sys.executable} -m autograder batch fx {folder} --out {out} --jobs 2")
-    done = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script],
-                          capture_output=True, text=True, timeout=900)
+    batch = (f"{sys.executable} -m autograder batch fx {folder} --out {out} --jobs 2")
+    env = f"env HOME={out.parent} RLCOURSE_REPO={FIXTURE_COURSE} RLCOURSE_TEST_SECRET=do-not-leak"
+    if os.geteuid() != 0:
+        command = ["sh", "-c", f"exec {env} {batch}"]
+    else:
+        python_root = os.path.realpath(sys.base_prefix)
+        switch = f"exec setpriv --reuid=65534 --regid=65534 --clear-groups {env} {batch}"
+        script = switch
+        if python_root.startswith("/root/"):
+            # /root is closed to other users: expose the Python installation to `nobody`, as a real user's machine would.
+            script = (f"mkdir -p /tmp/.stage && mount --bind {python_root} /tmp/.stage && "
+                      f"mount -t tmpfs -o mode=755 tmpfs /root && mkdir -p {python_root} && "
+                      f"mount --move /tmp/.stage {python_root} && {switch}")
+        command = ["unshare", "--mount", "--propagation", "private", "sh", "-c", script]
+    before = _code_digest()
+    done = subprocess.run(command, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     _check_gradebook(out)
+    assert _code_digest() == before, "course code on disk was modified"
     isolation = {json.loads((out / n / "result.json").read_text())["isolation"] for n in CASES}
     assert isolation - {"unknown"} == {"user-namespace"}

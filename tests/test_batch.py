@@ -1,6 +1,8 @@
 """Batch grading: the folder layouts, the gradebook, and resuming after a kill."""
 from __future__ import annotations
 
+import pytest
+
 import csv
 import os
 import shutil
@@ -11,6 +13,8 @@ import time
 
 from autograder.batch import discover
 from conftest import REPO
+
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
 SAMPLES = REPO / "autograder/samples/hw0_setup"
 EXPECTED = ["discounted_returns", "episode_returns"]

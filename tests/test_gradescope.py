@@ -1,6 +1,8 @@
 """The Gradescope bundle, unpacked into a tree laid out as Gradescope lays it out, and run there."""
 from __future__ import annotations
 
+import pytest
+
 import json
 import os
 import shutil
@@ -13,6 +15,8 @@ from autograder.gradescope import build_bundle
 from autograder.grader import Grader
 from autograder.report import gradescope_results
 from conftest import REPO
+
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
 
 def test_gradescope_results_have_one_test_per_stub():

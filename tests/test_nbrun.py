@@ -1,10 +1,14 @@
 """The notebook runner: parameters are injected, failures name the cell and line, budgets hold."""
 from __future__ import annotations
 
+import pytest
+
 import nbformat
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
 from autograder.nbrun import inject_parameters, run_notebook
+
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
 
 def notebook(tmp_path, *sources, name="nb.ipynb"):

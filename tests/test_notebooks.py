@@ -6,6 +6,8 @@ import pytest
 from autograder import course
 from autograder.nbrun import run_notebook
 
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
+
 IDS = course.assignment_ids()
 
 

@@ -13,6 +13,8 @@ from autograder import course
 from autograder.release import build_student_release, find_leaks, generate_assignments, notebook_signature
 from conftest import REPO
 
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
+
 
 def test_committed_student_notebooks_equal_a_fresh_regeneration(tmp_path):
     ids = course.assignment_ids()

@@ -8,6 +8,8 @@ import pytest
 from autograder import course
 from autograder.batch import run_batch
 
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
+
 WITH_SAMPLES = [i for i in course.assignment_ids() if (course.samples_dir(i) / "expected.json").exists()]
 
 

@@ -10,6 +10,8 @@ import pytest
 
 from conftest import REPO
 
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
+
 
 @pytest.mark.skipif(shutil.which("node") is None, reason="the formula check needs Node.js")
 def test_site_builds_cleanly_offline(tmp_path):

@@ -1,8 +1,9 @@
 """The zygote and the launcher. Runs in the sandbox's own processes, never in the grader.
 
-The grader forks the zygote first thing (see :mod:`autograder.supervisor`), before it has built
-any reference namespace or loaded any suite, so nothing secret is in the memory every worker
-inherits. The zygote imports the assignment's libraries once (torch, gymnasium, ... take over a
+The grader starts the zygote as a fresh interpreter (``python -m autograder.sandbox.zygote``, see
+:mod:`autograder.supervisor`), never as a fork of itself: every worker is forked from the zygote
+and inherits its memory, which therefore holds this package and the preloaded libraries and
+nothing of the grader (no reference namespace, no suite, no solution text). The zygote imports the assignment's libraries once (torch, gymnasium, ... take over a
 second) and then, for each request on its socket, forks a *launcher*, which enters new namespaces
 and forks the *worker* (PID 1 of its namespace). The worker isolates itself
 (:mod:`autograder.sandbox.isolation`) and serves requests (:mod:`autograder.sandbox.worker`).
@@ -120,3 +121,7 @@ def main(sock: socket.socket, preload: list[str]) -> None:
             _launch(config, list(fds))
         for fd in fds:
             os.close(fd)
+
+
+if __name__ == "__main__":  # python -m autograder.sandbox.zygote FD PRELOAD_JSON
+    main(socket.socket(fileno=int(sys.argv[1])), json.loads(sys.argv[2]))

@@ -2,13 +2,19 @@
 import numpy as np
 from scipy.special import expit
 
-from autograder.suite import stub
-from rlcourse.preferences import dueling_regret
+from autograder.suite import lend, stub
+from rlcourse.preferences import DuelingBandit, dueling_regret
 
 HINT = ("U = W/N + sqrt(alpha ln t / N) (1 where N = 0, 1/2 on the diagonal); candidates c with U[c, j] >= 1/2 for all j; "
         "challenger d = argmax_j U[j, c]; duel (c, d) through env.duel and update W.")
 
-RUN = "rucb(DuelingBandit(P, seed), horizon, 0.51, np.random.default_rng(seed))"
+RUN = "rucb(env, horizon, 0.51, np.random.default_rng(seed))"
+
+
+def _bandit(P, seed):
+    """The environment stays in the grader: the stub duels through `duel` and knows only `n_arms`."""
+    env = DuelingBandit(P, seed)
+    return env, lend(env, methods=["duel"], attrs=["n_arms"])
 
 
 def _bt_instance(rng, k):
@@ -39,7 +45,8 @@ def _uniform_regret(P, horizon):
 
 
 def _run(student, P, horizon, seed):
-    pairs = student.eval(RUN, P=P, horizon=horizon, seed=seed, timeout=60)
+    _, lent = _bandit(P, seed)
+    pairs = student.eval(RUN, env=lent, horizon=horizon, seed=seed, timeout=60)
     assert isinstance(pairs, np.ndarray) and pairs.shape == (horizon, 2), \
         f"rucb should return an array of shape ({horizon}, 2), got {type(pairs).__name__} {np.shape(pairs)}"
     assert pairs.dtype.kind in "iu", f"the duels should be integer arm indices, got dtype {pairs.dtype}"
@@ -51,8 +58,9 @@ def _run(student, P, horizon, seed):
 def test_plays_through_the_environment(student, rng):
     """Returns (horizon, 2) integer duels and calls env.duel once per step"""
     P, _ = _bt_instance(rng, 4)
-    n = student.eval("(lambda env: (rucb(env, 300, 0.51, np.random.default_rng(0)), env.n_duels)[1])(DuelingBandit(P, 0))",
-                     P=P, timeout=60)
+    env, lent = _bandit(P, 0)
+    student.eval(RUN, env=lent, horizon=300, seed=0, timeout=60)
+    n = env.n_duels
     assert n == 300, f"rucb should duel exactly once per step through env.duel (300 steps), it dueled {n} times"
     _run(student, P, 300, 0)
 
