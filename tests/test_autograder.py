@@ -91,3 +91,38 @@ def test_stand_ins_are_restored_after_the_test(fx_grader, tmp_path):
                      "double_scaled": SOLVED["double_scaled"]})
     got = scores(fx_grader.grade(nb))
     assert got["scaled_sum"][0] < 3 and got["double_scaled"] == (1, 1)
+
+
+class _Bandit:
+    """A trusted object with a secret: student code may duel, and read n_arms, nothing else."""
+
+    def __init__(self) -> None:
+        self.n_arms, self._P, self.calls = 3, "the hidden matrix", 0
+
+    def duel(self, i: int, j: int) -> float:
+        self.calls += 1
+        return float(i > j)
+
+
+def test_a_lent_object_stays_in_the_grader(fx_grader):
+    from autograder.session import Cell, Namespace, Session, StudentError
+    from autograder.suite import lend
+
+    session = Session(fx_grader.zygote, [Cell("setup", "import numpy as np")], fx_grader.config)
+    try:
+        session.start()
+        student, bandit = Namespace(session, "student"), _Bandit()
+        env = lend(bandit, methods=["duel"], attrs=["n_arms"])
+        assert student.eval("[env.duel(2, 1), env.duel(np.int64(0), 1), env.n_arms]", env=env) == [1.0, 0.0, 3]
+        assert bandit.calls == 2, "each duel runs on the trusted side"
+        for peek in ("env._P", "vars(env)", "env.calls", "env.__dict__", "setattr(env, 'n_arms', 9)",
+                     "repr(object.__getattribute__(env, '_lent')[0].__dict__)"):
+            with pytest.raises(StudentError) as caught:
+                student.eval(peek, env=env)
+            assert "hidden matrix" not in str(caught.value), peek
+        assert "hidden matrix" not in str(student.eval("repr(object.__getattribute__(env, '_lent'))", env=env))
+        forged = "object.__getattribute__(env, '_lent')[0].methods.append('_bandit_secret') or env._bandit_secret()"
+        with pytest.raises(StudentError, match="not lent"):  # the grader checks its own list, not the sandbox's copy
+            student.eval(forged, env=env)
+    finally:
+        session.close()

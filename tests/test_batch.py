@@ -73,3 +73,14 @@ def test_killed_batch_resumes_and_grades_each_submission_once(open_tmp):
     assert by_name["student00"]["score"] == "8" and by_name["student01"]["score"] == "5"
     assert by_name["empty_folder_submission"]["status"] == "ungradable"
     assert not list(out.rglob("*.tmp")), "no half-written files are left behind"
+
+
+def test_names_are_made_safe_then_unique_the_same_on_every_run(tmp_path):
+    folder = tmp_path / "flat"
+    folder.mkdir()
+    for name in ("alice smith", "alice_smith", "alice_smith-2", "Bob", "bob", "ça va"):
+        shutil.copy(SAMPLES / "complete.ipynb", folder / f"{name}.ipynb")
+    first = [e.name for e in discover(folder, "hw0_setup", EXPECTED)]
+    assert first == [e.name for e in discover(folder, "hw0_setup", EXPECTED)], "names must not change between runs"
+    assert len({n.lower() for n in first}) == 6, f"every submission keeps its own folder and row: {first}"
+    assert sorted(first) == sorted(["alice_smith", "alice_smith-3", "alice_smith-2", "Bob", "bob-2", "a_va"])

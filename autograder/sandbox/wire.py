@@ -112,15 +112,16 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
             return {"$npscalar": len(blobs) - 1}
         if type(v) is HandleRef:
             return {"$handle": v.id}
-        if type(v) is LentRef:
-            return {"$lent": {"id": v.id, "type": v.type_name, "methods": [str(m) for m in v.methods],
-                              "attrs": enc(v.attrs, d + 1)}}
         if _is_plain_tensor(v):
             blobs.append(_npy_bytes(v.detach().cpu().resolve_conj().resolve_neg().numpy()))
             return {"$tensor": len(blobs) - 1}
         if to_handle is None:
             raise TypeError(f"cannot send a {type(v).__name__} to the sandbox")
-        return {"$handle": to_handle(v).id, "type": type(v).__name__[:100]}
+        ref = to_handle(v)
+        if type(ref) is LentRef:  # only the grader's side lends (a LentRef inside a value is just an object)
+            return {"$lent": {"id": ref.id, "type": ref.type_name, "methods": [str(m) for m in ref.methods],
+                              "attrs": enc(ref.attrs, d + 1)}}
+        return {"$handle": ref.id, "type": type(v).__name__[:100]}
 
     return enc(value, depth), blobs
 

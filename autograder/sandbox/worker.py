@@ -69,6 +69,8 @@ class Lent:
     of the object itself (an environment's hidden parameters stay in the grader).
     """
 
+    __slots__ = ("_lent",)
+
     def __init__(self, ref: LentRef, call: Callable[[int, str, tuple, dict], Any]) -> None:
         object.__setattr__(self, "_lent", (ref, call))
 
