@@ -85,7 +85,9 @@ This folder holds everything you need for the course:
 - `rlcourse/`: the small library the notebooks import (environments, policies, rollouts, plots, videos).
 - `datasets/`: the data the assignments use, checked against `datasets/MANIFEST.json` when loaded. Each
   entry names the command that made its file; those scripts (`datasets/scripts/`) stay in the
-  instructors' repository, since some of them fit models you write in the assignments.
+  instructors' repository, since some of them fit models you write in the assignments. So does
+  the script that draws the lecture figures (`lectures/figures/make_figures.py`), which computes
+  several of your stubs; the figures themselves are here.
 
 ## Set up (Python 3.11)
 
