@@ -29,11 +29,13 @@ from autograder.notebook import (NotebookError, find_stubs, imported_modules, ma
 from autograder.results import (GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, StubResult, TestOutcome)
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
-from autograder.session import (Cell, CellStatus, LocalTransport, Namespace, SandboxFailure, SandboxTimeout,
-                                Session, StudentError)
+from autograder.session import (HELPERS, Cell, CellStatus, LocalTransport, Namespace, SandboxFailure,
+                                SandboxTimeout, Session, StudentError)
 from autograder.supervisor import Zygote
 
 FAST_PARAMETERS = {"FAST": True}
+SANDBOX_HELPERS = "sandbox_helpers.py"
+"""A suite's trusted helper module: runs in the sandbox after every cell, reached as ``student.helpers``."""
 SUITE_LOG_CHARS = 3000
 """The end of pytest's own output quoted when a suite cannot run (the traceback that matters is last)."""
 REFERENCE_ERROR_CHARS = 300
@@ -162,6 +164,8 @@ class Grader:
         course.check_assignment(assignment)
         self.assignment, self.limits = assignment, limits or course.limits(assignment)
         self.suite = course.suite_dir(assignment)
+        helpers = self.suite / SANDBOX_HELPERS
+        self.helpers = helpers.read_text() if helpers.is_file() else None
         release = read_notebook(course.release_notebook(assignment))
         self.plan = release_plan(release)
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
@@ -210,6 +214,8 @@ class Grader:
                 cells.append(Cell(c.label, c.source))
             elif c.label in stubs:
                 cells.append(Cell(c.label, stubs[c.label].source, stub=c.label))
+        if self.helpers is not None:
+            cells.append(Cell("suite helpers", self.helpers, module=HELPERS))
         return cells
 
     def grade(self, path: str | Path, name: str | None = None) -> GradeResult:
@@ -234,7 +240,7 @@ class Grader:
                 self._blame_setup(session, broken_setup[0])
             result.isolation = session.isolation
             plugin = SuitePlugin(Namespace(session, "student"),
-                                 Namespace(LocalTransport(self.reference_ns), "reference"), session.status,
+                                 Namespace(LocalTransport(self.reference_ns, self.helpers), "reference"), session.status,
                                  session, self.dependencies)
             self._run_suite(plugin)
             if plugin.grader_faults:

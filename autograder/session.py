@@ -58,11 +58,13 @@ class ReferenceFault(GraderError):
 
 @dataclass
 class Cell:
-    """A cell to run in the worker: trusted setup (``stub`` is None) or a submission's stub cell."""
+    """A cell to run in the worker: trusted setup (``stub`` is None), a submission's stub cell, or a
+    suite's helper module (``module`` names the namespace it runs in, apart from the notebook's)."""
 
     label: str
     source: str
     stub: str | None = None
+    module: str | None = None
 
 
 @dataclass
@@ -157,18 +159,26 @@ def _shift_blobs(tree: Any, offset: int) -> Any:
     return tree
 
 
-class Namespace:
-    """What a suite sees: ``ns.f(x)`` calls ``f`` on the other side, ``ns.eval("expr", a=x)`` evaluates."""
+HELPERS = "helpers"
+"""``student.helpers.f(...)`` calls ``f`` of the suite's ``sandbox_helpers.py``, run beside the notebook."""
 
-    def __init__(self, transport: Transport, label: str) -> None:
-        self._transport, self._label = transport, label
+
+class Namespace:
+    """What a suite sees: ``ns.f(x)`` calls ``f`` on the other side, ``ns.eval("expr", a=x)`` evaluates,
+    and ``ns.helpers.g(x)`` calls the suite's helper ``g`` there."""
+
+    def __init__(self, transport: Transport, label: str, prefix: str = "") -> None:
+        self._transport, self._label, self._prefix = transport, label, prefix
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):
             raise AttributeError(name)
+        if name == HELPERS and not self._prefix:
+            return Namespace(self._transport, f"{self._label} helpers", prefix=f"{HELPERS}.")
+        target = self._prefix + name
 
         def remote_function(*args: Any, timeout: float | None = None, **kwargs: Any) -> Any:
-            return _call(self._transport, name, args, kwargs, timeout)
+            return _call(self._transport, target, args, kwargs, timeout)
 
         remote_function.__name__ = name
         return remote_function
@@ -197,10 +207,12 @@ class LocalTransport(Transport):
     Any exception here is the reference's: it becomes a :class:`ReferenceFault`, a grader error.
     """
 
-    def __init__(self, namespace: dict[str, Any]) -> None:
+    def __init__(self, namespace: dict[str, Any], helpers: str | None = None) -> None:
         super().__init__()
         self.worker = Worker(lent_call=self.call_lent)
         self.worker.namespace = namespace
+        if helpers is not None:
+            self.worker.run({"op": "exec", "label": "suite helpers", "source": helpers, "module": HELPERS}, [])
 
     def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float | None = None) -> Any:
         try:
@@ -261,7 +273,8 @@ class Session(Transport):
 
     def _exec(self, cell: Cell) -> CellStatus:
         try:
-            self._raw({"op": "exec", "label": cell.label, "source": cell.source}, [], self.limits.exec_seconds)
+            self._raw({"op": "exec", "label": cell.label, "source": cell.source, "module": cell.module}, [],
+                      self.limits.exec_seconds)
             return CellStatus(True)
         except StudentError as err:
             if err.not_implemented:

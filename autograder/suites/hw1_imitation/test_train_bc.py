@@ -6,7 +6,6 @@ from autograder.suite import check_array, stub
 HINT = ("Split off round(val_fraction * N) pairs with np.random.default_rng(seed); each epoch shuffle the rest, "
         "loop over minibatches (zero_grad, bc_loss, backward, step); record the epoch's mean training loss and the "
         "held-out loss; return {'train': [...], 'val': [...]}.")
-MAKE = "(torch.manual_seed(policy_seed), GaussianPolicy(obs_dim, act_dim, hidden=hidden))[1]"
 
 
 def _linear_expert(rng, n):
@@ -17,11 +16,9 @@ def _linear_expert(rng, n):
     return W, b, sigma, obs.astype(np.float32), actions.astype(np.float32)
 
 
-def _train(in_sandbox, obs, actions, hidden=(), policy_seed=0, **kwargs):
+def _train(student, obs, actions, hidden=(), policy_seed=0, **kwargs):
     """(policy handle, history) of the student's train_bc on a freshly built, seeded policy."""
-    expr = "(lambda p: (p, train_bc(p, obs, actions, **kw)))(" + MAKE + ")"
-    return in_sandbox(expr, obs=obs, actions=actions, kw=kwargs, policy_seed=policy_seed,
-                          obs_dim=obs.shape[1], act_dim=actions.shape[1], hidden=tuple(hidden))
+    return student.helpers.train_fresh_policy(obs, actions, hidden=tuple(hidden), policy_seed=policy_seed, **kwargs)
 
 
 def _history(hist, n_epochs):
@@ -35,10 +32,10 @@ def _history(hist, n_epochs):
 
 
 @stub("train_bc", points=2, hint=HINT)
-def test_recovers_a_linear_gaussian_expert(student, in_sandbox, trusted_copy, rng):
+def test_recovers_a_linear_gaussian_expert(student, trusted_copy, rng):
     """A linear policy trained on 3,000 pairs from a linear-Gaussian expert finds its weights, bias and noise"""
     W, b, sigma, obs, actions = _linear_expert(rng, 3000)
-    policy, hist = _train(in_sandbox, obs, actions, n_epochs=40, batch_size=128, lr=3e-2, seed=0)
+    policy, hist = _train(student, obs, actions, n_epochs=40, batch_size=128, lr=3e-2, seed=0)
     _history(hist, 40)
     learned = trusted_copy(policy)
     check_array(learned.mean.weight.detach().numpy().astype(float), W, atol=0.06, rtol=0, name="the learned weights")
@@ -48,20 +45,20 @@ def test_recovers_a_linear_gaussian_expert(student, in_sandbox, trusted_copy, rn
 
 
 @stub("train_bc", points=1, hint=HINT)
-def test_history_has_one_finite_entry_per_epoch(student, in_sandbox, rng):
+def test_history_has_one_finite_entry_per_epoch(student, rng):
     """One training and one validation loss per epoch, finite, and falling"""
     _, _, _, obs, actions = _linear_expert(rng, 600)
-    _, hist = _train(in_sandbox, obs, actions, hidden=(8,), n_epochs=7, batch_size=50, lr=1e-2, seed=1)
+    _, hist = _train(student, obs, actions, hidden=(8,), n_epochs=7, batch_size=50, lr=1e-2, seed=1)
     train, val = _history(hist, 7)
     assert np.isfinite(train).all() and np.isfinite(val).all(), "the losses should be finite numbers"
     assert train[-1] < train[0] and val[-1] < val[0], "both losses should fall over the epochs"
 
 
 @stub("train_bc", points=1, hint="Draw the split and every shuffle from np.random.default_rng(seed), so a seed fixes the run.")
-def test_is_reproducible_under_a_seed(student, in_sandbox, trusted_copy, rng):
+def test_is_reproducible_under_a_seed(student, trusted_copy, rng):
     """The same seed gives the same history and weights; another seed gives another run"""
     _, _, _, obs, actions = _linear_expert(rng, 500)
-    runs = [_train(in_sandbox, obs, actions, hidden=(8,), n_epochs=3, batch_size=32, lr=1e-2, seed=s) for s in (4, 4, 5)]
+    runs = [_train(student, obs, actions, hidden=(8,), n_epochs=3, batch_size=32, lr=1e-2, seed=s) for s in (4, 4, 5)]
     (p1, h1), (p2, h2), (_, h3) = runs
     assert h1 == h2, "two runs with the same seed (and the same initial policy) should give identical histories"
     check_array(trusted_copy(p1).mean.weight.detach().numpy(), trusted_copy(p2).mean.weight.detach().numpy(),
@@ -70,33 +67,32 @@ def test_is_reproducible_under_a_seed(student, in_sandbox, trusted_copy, rng):
 
 
 @stub("train_bc", points=1, hint="Convert numpy inputs of any float dtype to float32 tensors; a last minibatch may be smaller; never modify the inputs.")
-def test_small_float64_data_and_inputs_untouched(student, in_sandbox, rng):
+def test_small_float64_data_and_inputs_untouched(student, rng):
     """Ten float64 pairs with a batch size of 256 train without error and leave the arrays unchanged"""
     obs, actions = rng.normal(size=(10, 3)), rng.normal(size=(10, 2))
     keep = obs.copy(), actions.copy()
-    got = in_sandbox("(lambda p, o, a: (train_bc(p, o, a, n_epochs=2, batch_size=256, val_fraction=0.2, seed=0), o, a))(" + MAKE + ", obs, actions)",
-                         obs=obs, actions=actions, policy_seed=0, obs_dim=3, act_dim=2, hidden=(4,))
-    hist, obs_after, actions_after = got
+    hist, obs_after, actions_after = student.helpers.inputs_after_training(
+        obs, actions, hidden=(4,), n_epochs=2, batch_size=256, val_fraction=0.2, seed=0)
     _history(hist, 2)
     check_array(obs_after, keep[0], rtol=0, atol=0, name="the observations after training")
     check_array(actions_after, keep[1], rtol=0, atol=0, name="the actions after training")
 
 
 @stub("train_bc", points=1, hint="With val_fraction = 0 nothing is held out: record float('nan') as the validation loss and train on everything.")
-def test_no_validation_split(student, in_sandbox, rng):
+def test_no_validation_split(student, rng):
     """val_fraction = 0: validation entries are NaN and training still works"""
     _, _, _, obs, actions = _linear_expert(rng, 300)
-    _, hist = _train(in_sandbox, obs, actions, n_epochs=4, batch_size=64, lr=3e-2, seed=0, val_fraction=0.0)
+    _, hist = _train(student, obs, actions, n_epochs=4, batch_size=64, lr=3e-2, seed=0, val_fraction=0.0)
     assert isinstance(hist, dict) and len(hist.get("val", [])) == 4, "one validation entry per epoch"
     assert all(np.isnan(v) for v in hist["val"]), f"with nothing held out the validation losses should be NaN, got {hist['val']}"
     assert hist["train"][-1] < hist["train"][0], "the training loss should fall"
 
 
 @stub("train_bc", points=1, hint="Never train on the held-out pairs: split once before the first epoch, and shuffle only the training part.")
-def test_validation_pairs_are_held_out(student, in_sandbox, rng):
+def test_validation_pairs_are_held_out(student, rng):
     """On unpredictable labels a large network memorises its training pairs, so the held-out loss must end far above the training loss"""
     obs, actions = rng.normal(size=(40, 3)).astype(np.float32), rng.normal(size=(40, 2)).astype(np.float32)
-    _, hist = _train(in_sandbox, obs, actions, hidden=(64, 64), n_epochs=150, batch_size=64, lr=1e-2, seed=0,
+    _, hist = _train(student, obs, actions, hidden=(64, 64), n_epochs=150, batch_size=64, lr=1e-2, seed=0,
                      val_fraction=0.5)
     train, val = _history(hist, 150)
     assert val[-1] > train[-1] + 2.0, (f"after memorising random labels the validation loss ({val[-1]:.2f}) should be far "
