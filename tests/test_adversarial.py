@@ -377,3 +377,38 @@ def test_corpus_scores_nothing_as_a_normal_user(corpus):
     assert _code_digest() == before, "course code on disk was modified"
     isolation = {json.loads((out / n / "result.json").read_text())["isolation"] for n in CASES}
     assert isolation - {"unknown"} == {"user-namespace"}
+
+
+PEEK_AT_THE_BANDIT = """
+def rucb(env, horizon, alpha=0.51, rng=None):
+    import gc
+    P = None
+    for attempt in (lambda: env._P, lambda: vars(env)["_P"], lambda: env.__dict__["_P"],
+                    lambda: object.__getattribute__(env, "_lent")[0].attrs["_P"],
+                    lambda: next(o._P for o in gc.get_objects() if type(o).__name__ == "DuelingBandit")):
+        try:
+            P = attempt()
+            break
+        except Exception:
+            pass
+    best = int(np.argmax((np.asarray(P) > 0.5).sum(axis=1))) if P is not None else 0
+    for _ in range(horizon):
+        env.duel(best, best)
+    return np.full((horizon, 2), best, dtype=np.int64)
+"""
+
+
+def test_reading_a_lent_environments_hidden_state_scores_nothing(open_tmp):
+    """hw3's rucb gets a dueling bandit that stays in the grader: no attribute or object in the sandbox holds P."""
+    from autograder.grader import Grader
+
+    notebook = with_cells(REPO / "autograder/samples/hw3_preferences/complete.ipynb", open_tmp / "peek.ipynb",
+                          {"rucb": PEEK_AT_THE_BANDIT})
+    grader = Grader("hw3_preferences")
+    try:
+        result = grader.grade(notebook)
+    finally:
+        grader.close()
+    rucb = next(s for s in result.stubs if s.name == "rucb")
+    assert rucb.max_score > 0 and rucb.score == 0, [t.message for t in rucb.tests]
+    assert result.score == result.max_score - rucb.max_score, "the other stubs are the complete sample's"
