@@ -29,6 +29,11 @@ SAFE_ENV = {"PATH", "LANG", "MUJOCO_GL", "PYOPENGL_PLATFORM", "OMP_NUM_THREADS",
             "OPENBLAS_NUM_THREADS", "OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "VIRTUAL_ENV"}
 """The only environment variables a worker keeps (with ``LC_*`` and ``PYTHON*``): no tokens, no paths of the grader's."""
 WORKDIR = "/tmp/work"
+IMPORT_TIME_PROBES = {"gymnasium": ("gymnasium.envs.mujoco.mujoco_rendering",)}
+"""Modules imported in the zygote whenever their package is preloaded, because importing them starts a
+program (glfw checks its library's version in a child interpreter). A worker reads the course's files
+with the identity of their owner, but a program it starts reads with the worker's own uid (exec resets
+the file-system identity), which a checkout of mode 700 shuts out: such probes must run here, before."""
 
 
 def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, existing: int) -> None:
@@ -101,7 +106,7 @@ def main(sock: socket.socket, preload: list[str]) -> None:
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # children are reaped automatically
     isolation._libc.prctl(isolation.PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # die with the grader
     os.environ.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg")
-    for module in preload:
+    for module in [*preload, *(m for p in preload for m in IMPORT_TIME_PROBES.get(p.split(".")[0], ()))]:
         try:
             __import__(module)
         except Exception:  # noqa: BLE001 - a module that fails here fails again, visibly, in the worker
