@@ -7,14 +7,14 @@ import pytest
 
 from autograder import course
 from autograder.batch import run_batch
+from conftest import FIXTURE_COURSE
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
 WITH_SAMPLES = [i for i in course.assignment_ids() if (course.samples_dir(i) / "expected.json").exists()]
 
 
-@pytest.mark.parametrize("assignment", WITH_SAMPLES)
-def test_samples_score_as_expected(assignment, open_tmp):
+def _check(assignment, open_tmp):
     expected = json.loads((course.samples_dir(assignment) / "expected.json").read_text())
     results = {r.submission: r for r in run_batch(assignment, course.samples_dir(assignment), open_tmp / "out",
                                                   jobs=2, progress=False)}
@@ -24,3 +24,15 @@ def test_samples_score_as_expected(assignment, open_tmp):
             want = stub.max_score if outcome[stub.name] == "full" else 0
             assert stub.max_score > 0 and stub.score == want, \
                 (sample, stub.name, [t.message for t in stub.tests if not t.passed][:2])
+
+
+@pytest.mark.parametrize("assignment", WITH_SAMPLES)
+def test_samples_score_as_expected(assignment, open_tmp):
+    _check(assignment, open_tmp)
+
+
+def test_the_worked_example_of_contributing_scores_as_expected(open_tmp, monkeypatch):
+    """CONTRIBUTING.md's two-stub example (``ex`` in the fixture course) passes the same check."""
+    monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
+    monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
+    _check("ex", open_tmp)
