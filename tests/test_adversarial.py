@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shlex
 import socket
 import subprocess
 import sys
@@ -363,8 +364,9 @@ def test_corpus_scores_nothing_as_a_normal_user(corpus):
         pytest.skip("this machine refuses unprivileged user namespaces (a container without them, say): "
                     "the grader falls back to limits alone there, which this corpus would rightly fail")
     folder, out = corpus
-    batch = (f"{sys.executable} -m autograder batch fx {folder} --out {out} --jobs 2")
-    env = f"env HOME={out.parent} RLCOURSE_REPO={FIXTURE_COURSE} RLCOURSE_TEST_SECRET=do-not-leak"
+    q = shlex.quote
+    batch = f"{q(sys.executable)} -m autograder batch fx {q(str(folder))} --out {q(str(out))} --jobs 2"
+    env = f"env HOME={q(str(out.parent))} RLCOURSE_REPO={q(str(FIXTURE_COURSE))} RLCOURSE_TEST_SECRET=do-not-leak"
     if os.geteuid() != 0:
         command = ["sh", "-c", f"exec {env} {batch}"]
     elif not _others_may_read(REPO / "autograder" / "__init__.py", Path(sys.prefix) / "pyvenv.cfg"):
@@ -376,9 +378,9 @@ def test_corpus_scores_nothing_as_a_normal_user(corpus):
         script = switch
         if python_root.startswith("/root/"):
             # /root is closed to other users: expose the Python installation to `nobody`, as a real user's machine would.
-            script = (f"mkdir -p /tmp/.stage && mount --bind {python_root} /tmp/.stage && "
-                      f"mount -t tmpfs -o mode=755 tmpfs /root && mkdir -p {python_root} && "
-                      f"mount --move /tmp/.stage {python_root} && {switch}")
+            script = (f"mkdir -p /tmp/.stage && mount --bind {q(python_root)} /tmp/.stage && "
+                      f"mount -t tmpfs -o mode=755 tmpfs /root && mkdir -p {q(python_root)} && "
+                      f"mount --move /tmp/.stage {q(python_root)} && {switch}")
         command = ["unshare", "--mount", "--propagation", "private", "sh", "-c", script]
     before = _code_digest()
     done = subprocess.run(command, capture_output=True, text=True, timeout=900)
