@@ -410,17 +410,42 @@ def rucb(env, horizon, alpha=0.51, rng=None):
 """
 
 
-def test_reading_a_lent_environments_hidden_state_scores_nothing(open_tmp):
-    """hw3's rucb gets a dueling bandit that stays in the grader: no attribute or object in the sandbox holds P."""
+SHIPPED_ANSWERS = """
+import torch
+from rlcourse.preferences import RewardEnsemble, load_hopper_preferences
+from rlcourse.rlhf import load_reward_model
+
+class _LookUp(torch.nn.Module):
+    \"\"\"Per-step rewards looked up in the shipped preference file, else the shipped hw4 model.\"\"\"
+    def __init__(self, obs):
+        super().__init__()
+        prefs, self.model = load_hopper_preferences(), load_reward_model()
+        self.known = {prefs.obs[i].tobytes(): prefs.rewards[i] for i in range(len(prefs.obs))}
+    def predict(self, obs, act):
+        obs = np.asarray(obs, dtype=np.float32)
+        looked_up = [self.known.get(o.tobytes()) for o in obs]
+        if all(r is not None for r in looked_up):
+            return np.stack(looked_up)[None]
+        return self.model.predict(obs, act)
+
+def train_reward_model(obs, act, pairs, mu, **kwargs):
+    return _LookUp(obs)
+"""
+
+
+def test_shipped_answers_and_a_lent_environments_hidden_state_score_nothing(open_tmp):
+    """hw3's learners are judged on data no shipped model or file answers, and its rucb gets a dueling bandit
+    that stays in the grader (no attribute or object in the sandbox holds P)."""
     from autograder.grader import Grader
 
-    notebook = with_cells(REPO / "autograder/samples/hw3_preferences/complete.ipynb", open_tmp / "peek.ipynb",
-                          {"rucb": PEEK_AT_THE_BANDIT})
+    notebook = with_cells(REPO / "autograder/samples/hw3_preferences/complete.ipynb", open_tmp / "cheat.ipynb",
+                          {"rucb": PEEK_AT_THE_BANDIT, "train_reward_model": SHIPPED_ANSWERS})
     grader = Grader("hw3_preferences")
     try:
         result = grader.grade(notebook)
     finally:
         grader.close()
-    rucb = next(s for s in result.stubs if s.name == "rucb")
-    assert rucb.max_score > 0 and rucb.score == 0, [t.message for t in rucb.tests]
-    assert result.score == result.max_score - rucb.max_score, "the other stubs are the complete sample's"
+    cheated = [s for s in result.stubs if s.name in ("rucb", "train_reward_model")]
+    for stub in cheated:
+        assert stub.max_score > 0 and stub.score == 0, (stub.name, [t.message for t in stub.tests])
+    assert result.score == result.max_score - sum(s.max_score for s in cheated), "the other stubs are the complete sample's"
