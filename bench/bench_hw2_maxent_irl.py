@@ -57,10 +57,12 @@ def evaluate(ns: dict, mdp, demos, reward: np.ndarray) -> dict:
     """Gap, correlation and return ratio of a learned state reward (S,)."""
     policy = ns["soft_value_iteration"](mdp.P, reward, mdp.horizon)
     mu_d = ns["feature_expectations"](demos.states, mdp.features)
-    mu_w = mdp.features.T @ ns["state_visitation_frequency"](mdp.P, policy, mdp.p0, mdp.horizon)
+    visits = ns["state_visitation_frequency"](mdp.P, policy, mdp.p0, mdp.horizon)
+    expert_visits = ns["state_visitation_frequency"](mdp.P, mdp.expert_policy(), mdp.p0, mdp.horizon)
+    mu_w = mdp.features.T @ visits
     return {"gap": float(np.linalg.norm(mu_d - mu_w) / np.linalg.norm(mu_d)),
             "corr": float(np.corrcoef(reward, mdp.true_reward)[0, 1]),
-            "ratio": mdp.expected_return(policy) / mdp.expected_return(mdp.expert_policy())}
+            "ratio": float(visits @ mdp.true_reward) / float(expert_visits @ mdp.true_reward)}
 
 
 def run_imitation(problems: list, bench_python: str) -> list[dict] | str:

@@ -68,10 +68,6 @@ class GridMDP:
         """``n`` expert demonstrations (states and actions, ``(n, T)`` each)."""
         return sample_trajectories(self.P, self.expert_policy(), self.p0, n, rng)
 
-    def expected_return(self, policy: np.ndarray, reward: np.ndarray | None = None) -> float:
-        """Exact expected return of a ``(T, S, A)`` policy under ``reward`` (default: the true one)."""
-        return policy_return(self.P, policy, self.true_reward if reward is None else reward, self.p0)
-
 
 def transition_tensor(size: int, slip: float) -> np.ndarray:
     """``P[s, a, s']`` of a ``size x size`` grid: the intended move with probability ``1 - slip``,
@@ -128,16 +124,6 @@ def boltzmann_policy(q: np.ndarray, beta: float) -> np.ndarray:
     z = beta * (q - q.max(axis=-1, keepdims=True))
     p = np.exp(z)
     return p / p.sum(axis=-1, keepdims=True)
-
-
-def policy_return(P: np.ndarray, policy: np.ndarray, reward: np.ndarray, p0: np.ndarray) -> float:
-    """Exact expected sum of ``reward(s_t)`` over ``t < T`` under a ``(T, S, A)`` policy
-    (backward policy evaluation)."""
-    P_flat = _sparse_rows(P)
-    v = np.zeros(P.shape[0])
-    for t in reversed(range(policy.shape[0])):
-        v = reward + (policy[t] * (P_flat @ v).reshape(P.shape[:2])).sum(axis=1)
-    return float(p0 @ v)
 
 
 def terrain_grid(size: int = 20, horizon: int = 50, slip: float = 0.1, seed: int = 0,
