@@ -18,6 +18,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from rlcourse.checkpoint import load_model, save_model
+
 
 @dataclass
 class LMConfig:
@@ -172,17 +174,13 @@ def completion_mask(tokens: torch.Tensor, prompt_len: int, pad_id: int = 0) -> t
 
 
 def save_lm(model: TinyLM, path: str | Path, **metadata: float | int | str) -> None:
-    """Save config, weights and metadata (loadable with ``weights_only=True``)."""
-    torch.save({"config": asdict(model.cfg), "state_dict": model.state_dict(), "metadata": metadata}, path)
+    """Save a :class:`TinyLM` as a checkpoint (its :class:`LMConfig`, ``state_dict``, metadata), atomically."""
+    save_model(model, path, asdict(model.cfg), **metadata)
 
 
 def load_lm(path: str | Path) -> TinyLM:
-    """A :class:`TinyLM` saved by :func:`save_lm`, in eval mode."""
-    blob = torch.load(path, map_location="cpu", weights_only=True)
-    model = TinyLM(LMConfig(**blob["config"]))
-    model.load_state_dict(blob["state_dict"])
-    model.metadata = blob.get("metadata", {})
-    return model.eval()
+    """A :class:`TinyLM` saved by :func:`save_lm`, in eval mode, with its ``.metadata``."""
+    return load_model(path, lambda **config: TinyLM(LMConfig(**config)))
 
 
 def load_sft() -> TinyLM:

@@ -7,9 +7,9 @@ log standard deviation. With ``squash=True`` the acting mean is passed through
 the unsquashed Gaussian, which is what behaviour cloning and DPO on continuous
 actions need.
 
-Policies are saved as plain ``state_dict`` files with their constructor
-arguments beside them (see :func:`save_policy`), so loading never unpickles
-arbitrary objects (``torch.load(weights_only=True)``).
+Policies are saved in the course's one checkpoint format (:mod:`rlcourse.checkpoint`):
+their constructor arguments, ``state_dict`` and metadata, so loading never unpickles
+arbitrary objects.
 """
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ import numpy as np
 import torch
 from torch import nn
 from torch.distributions import Independent, Normal
+
+from rlcourse.checkpoint import load_model, save_model
 
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh}
 
@@ -89,18 +91,10 @@ class GaussianPolicy(nn.Module):
 
 
 def save_policy(policy: GaussianPolicy, path: str | Path, **metadata: float | int | str) -> None:
-    """Save ``policy`` as ``{"config", "state_dict", "metadata"}``: tensors and plain values only."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save({"config": policy.config, "state_dict": policy.state_dict(), "metadata": metadata}, tmp)
-    tmp.replace(path)
+    """Save ``policy`` as a checkpoint (config, ``state_dict``, metadata), atomically."""
+    save_model(policy, path, policy.config, **metadata)
 
 
 def load_policy(path: str | Path) -> GaussianPolicy:
-    """Load a policy written by :func:`save_policy` (no arbitrary unpickling)."""
-    blob = torch.load(Path(path), map_location="cpu", weights_only=True)
-    policy = GaussianPolicy(**blob["config"])
-    policy.load_state_dict(blob["state_dict"])
-    policy.metadata = dict(blob.get("metadata", {}))
-    return policy.eval()
+    """A policy written by :func:`save_policy`, in eval mode, with its ``.metadata``."""
+    return load_model(path, GaussianPolicy)

@@ -24,6 +24,7 @@ import torch
 from torch.distributions import kl_divergence
 
 from rlcourse import data as _data
+from rlcourse.checkpoint import load_model, save_model
 from rlcourse.nets import GaussianPolicy
 from rlcourse.ppo import TrainingLog
 from rlcourse.preferences import RewardEnsemble
@@ -42,25 +43,17 @@ def load_reference() -> GaussianPolicy:
 
 # --------------------------------------------------------------------------- the learned reward
 def save_reward_model(ensemble: RewardEnsemble, path: str | Path, **metadata: float | int | str) -> None:
-    """Save a reward ensemble as ``{"config", "state_dict", "metadata"}``: tensors and plain values only."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Save a reward ensemble as a checkpoint (config, ``state_dict``, metadata), atomically."""
     config = {"obs_dim": ensemble.obs_dim, "act_dim": ensemble.act_dim, "n_members": ensemble.n_members,
               "hidden": ensemble.hidden}
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save({"config": config, "state_dict": ensemble.state_dict(), "metadata": metadata}, tmp)
-    tmp.replace(path)
+    save_model(ensemble, path, config, **metadata)
 
 
 def load_reward_model(name: str = REWARD_MODEL_FILE) -> RewardEnsemble:
     """The shipped reward ensemble (made by ``datasets/scripts/make_hw4_reward_model.py`` from hw3's pairs),
     in eval mode; ``.metadata`` holds its held-out accuracy, the mean and standard deviation of its
     per-step reward on the preference data (``step_mean``, ``step_std``) and its fit time."""
-    blob = torch.load(_data.verify(name), map_location="cpu", weights_only=True)
-    ensemble = RewardEnsemble(**blob["config"])
-    ensemble.load_state_dict(blob["state_dict"])
-    ensemble.metadata = dict(blob["metadata"])
-    return ensemble.eval().requires_grad_(False)
+    return load_model(_data.verify(name), RewardEnsemble).requires_grad_(False)
 
 
 def reward_function(ensemble: RewardEnsemble) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
