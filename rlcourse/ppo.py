@@ -27,20 +27,18 @@ discounted return's standard deviation (the rewards PPO sees; the logged returns
 """
 from __future__ import annotations
 
-import copy
-import time
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Optional
 
-import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 from torch.distributions import kl_divergence
 
+from rlcourse.envs import HOPPER as ENV_ID
+from rlcourse.envs import make_envs  # noqa: F401  (hw4 and its suite import make_envs from here)
 from rlcourse.nets import GaussianPolicy, mlp
-
-ENV_ID = "Hopper-v5"
+from rlcourse.training import EvaluationHook, TrainingLog, due, fine_tuning_copies
 
 
 @dataclass
@@ -121,28 +119,6 @@ class Critic(nn.Module):
         return self.net(((obs - mean) / std).clamp(-10, 10)).squeeze(-1)
 
 
-def make_envs(n_envs: int, env_id: str = ENV_ID, wrap: Optional[Callable] = None) -> gym.vector.VectorEnv:
-    """``n_envs`` copies of ``env_id`` that reset themselves in the same step an episode ends
-    (the final observation is in ``info["final_obs"]``), optionally wrapped by ``wrap(envs)``."""
-    envs = gym.vector.SyncVectorEnv([lambda: gym.make(env_id) for _ in range(n_envs)],
-                                    autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
-    return wrap(envs) if wrap is not None else envs
-
-
-@dataclass
-class TrainingLog:
-    """What a training loop records: its ``config``, and one dict per evaluation in ``evals``
-    (``step``, ``time`` and what ``evaluate`` returned). Subclasses add their per-update rows."""
-
-    config: dict
-    evals: list[dict] = field(default_factory=list)
-
-    def series(self, key: str, source: str = "evals") -> tuple[np.ndarray, np.ndarray]:
-        """``(steps, values)`` of ``key`` over the rows of ``source`` that have it (each row has a ``step``)."""
-        rows = [r for r in getattr(self, source) if key in r]
-        return np.array([r["step"] for r in rows]), np.array([r[key] for r in rows], dtype=float)
-
-
 @dataclass
 class PPOLog(TrainingLog):
     """What :func:`ppo` records: besides ``evals``, ``iterations`` holds one dict per update (``step``,
@@ -166,13 +142,13 @@ def ppo(policy: GaussianPolicy, reference: GaussianPolicy, compute_gae: Callable
     cfg = config
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    actor = copy.deepcopy(policy).train().requires_grad_(True)
-    reference = copy.deepcopy(reference).eval().requires_grad_(False)
+    actor, reference = fine_tuning_copies(policy, reference)
     envs = make_envs(cfg.n_envs, cfg.env_id, wrap=wrap)
     critic = Critic(envs.single_observation_space.shape[0])
     actor_opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr, eps=1e-5)
     critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
     log = PPOLog(config=asdict(cfg))
+    run_evaluation = EvaluationHook(log, evaluate, verbose)
 
     # Storage: (n_steps, n_envs, ...), filled in place every rollout.
     T, N = cfg.n_steps, cfg.n_envs
@@ -184,17 +160,9 @@ def ppo(policy: GaussianPolicy, reference: GaussianPolicy, compute_gae: Callable
     ep_true, ep_train = np.zeros(N), np.zeros(N)
     obs, _ = envs.reset(seed=cfg.seed)
     critic.obs_rms.update(obs)
-    start, step = time.perf_counter(), 0
+    step = 0
 
-    def run_evaluation() -> None:
-        if evaluate is not None:
-            result = evaluate(actor.eval())
-            actor.train()
-            log.evals.append({"step": step, "time": time.perf_counter() - start, **result})
-            if verbose:
-                print(f"  step {step:>7d}  " + "  ".join(f"{k} {v:.3g}" for k, v in result.items()), flush=True)
-
-    run_evaluation()
+    run_evaluation(actor, step)
     for iteration in range(cfg.n_iterations):
         finished_true, finished_train = [], []
         # ---- rollout ------------------------------------------------------------------
@@ -256,13 +224,13 @@ def ppo(policy: GaussianPolicy, reference: GaussianPolicy, compute_gae: Callable
                     terms_sum[k] = terms_sum.get(k, 0.0) + float(v)
                 n_updates += 1
         explained = 1 - float((b_ret - val_buf.reshape(-1)).var() / (b_ret.var() + 1e-8))
-        row = {"step": step, "time": time.perf_counter() - start, "explained_var": explained,
+        row = {"step": step, "time": run_evaluation.elapsed(), "explained_var": explained,
                **{k: v / n_updates for k, v in terms_sum.items()}}
         if finished_true:
             row["train_true_return"] = float(np.mean(finished_true))
             row["train_return"] = float(np.mean(finished_train))
         log.iterations.append(row)
-        if (iteration + 1) % cfg.eval_every == 0 or iteration + 1 == cfg.n_iterations:
-            run_evaluation()
+        if due(iteration + 1, cfg.eval_every, cfg.n_iterations):
+            run_evaluation(actor, step)
     envs.close()
     return actor.eval(), log

@@ -13,8 +13,6 @@
 """
 from __future__ import annotations
 
-import copy
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
@@ -25,12 +23,13 @@ from torch.distributions import kl_divergence
 
 from rlcourse import data as _data
 from rlcourse.checkpoint import load_model, save_model
+from rlcourse.envs import HOPPER
 from rlcourse.nets import GaussianPolicy
-from rlcourse.ppo import TrainingLog
 from rlcourse.preferences import RewardEnsemble
 from rlcourse.rollouts import rollout
+from rlcourse.training import EvaluationHook, TrainingLog, due, fine_tuning_copies
 
-ENV_ID = "Hopper-v5"
+ENV_ID = HOPPER
 REFERENCE_FILE = "hw4/reference_policy.pt"
 REWARD_MODEL_FILE = "hw4/reward_model.pt"
 EVAL_SEED = 1000
@@ -139,29 +138,20 @@ def train_dpo(policy: GaussianPolicy, reference: GaussianPolicy, dpo_loss: Calla
     of ``batch_size`` pairs drawn with replacement. Returns the trained copy and the log."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    actor = copy.deepcopy(policy).train().requires_grad_(True)
-    reference = copy.deepcopy(reference).eval().requires_grad_(False)
+    actor, reference = fine_tuning_copies(policy, reference)
     opt = torch.optim.Adam(actor.parameters(), lr=lr)
     log = DPOLog(config=dict(beta=beta, n_steps=n_steps, batch_size=batch_size, lr=lr, seed=seed))
-    start = time.perf_counter()
+    run_evaluation = EvaluationHook(log, evaluate, verbose)
 
-    def run_evaluation(step: int) -> None:
-        if evaluate is not None:
-            result = evaluate(actor.eval())
-            actor.train()
-            log.evals.append({"step": step, "time": time.perf_counter() - start, **result})
-            if verbose:
-                print(f"  step {step:>5d}  " + "  ".join(f"{k} {v:.3g}" for k, v in result.items()), flush=True)
-
-    run_evaluation(0)
+    run_evaluation(actor, 0)
     for step in range(1, n_steps + 1):
         chosen, rejected = train.batch(rng.integers(len(train), size=batch_size))
         loss, info = dpo_loss(actor, reference, chosen, rejected, beta)
         opt.zero_grad()
         loss.backward()
         opt.step()
-        if step % log_every == 0 or step == n_steps:
-            row = {"step": step, "time": time.perf_counter() - start, "loss": float(loss.detach()),
+        if due(step, log_every, n_steps):
+            row = {"step": step, "time": run_evaluation.elapsed(), "loss": float(loss.detach()),
                    **{k: float(torch.as_tensor(v).detach()) for k, v in info.items()}}
             if val is not None:
                 with torch.no_grad():
@@ -169,6 +159,6 @@ def train_dpo(policy: GaussianPolicy, reference: GaussianPolicy, dpo_loss: Calla
                     val_loss, val_info = dpo_loss(actor, reference, *val.batch(idx), beta)
                 row.update(val_loss=float(val_loss), **{f"val_{k}": float(v) for k, v in val_info.items()})
             log.steps.append(row)
-        if step % eval_every == 0 or step == n_steps:
-            run_evaluation(step)
+        if due(step, eval_every, n_steps):
+            run_evaluation(actor, step)
     return actor.eval(), log

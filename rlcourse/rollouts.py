@@ -10,9 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
+
+from rlcourse.envs import make_envs
 
 PolicyFn = Callable[[np.ndarray], np.ndarray]
 """Maps a batch of observations ``(n, obs_dim)`` to a batch of actions ``(n, act_dim)``."""
@@ -44,11 +45,6 @@ class Episodes:
         return self.obs[self.mask], self.actions[self.mask]
 
 
-def make_vector_env(env_id: str, n: int, **env_kwargs) -> gym.vector.SyncVectorEnv:
-    """``n`` copies of ``env_id`` in one synchronous vector env (no auto-reset is relied on)."""
-    return gym.vector.SyncVectorEnv([lambda: gym.make(env_id, **env_kwargs) for _ in range(n)])
-
-
 def rollout(
     policy: PolicyFn,
     env_id: str,
@@ -63,7 +59,7 @@ def rollout(
     The same seed and a deterministic policy give the same episodes.
     ``progress=None`` shows a bar only for long runs (over 10,000 env steps).
     """
-    envs = make_vector_env(env_id, n_episodes, **env_kwargs)
+    envs = make_envs(n_episodes, env_id, same_step_reset=False, **env_kwargs)  # no auto-reset is relied on
     horizon = max_steps or envs.envs[0].spec.max_episode_steps or 1000
     obs, _ = envs.reset(seed=seed)
     obs_buf = np.zeros((n_episodes, horizon) + obs.shape[1:], dtype=np.float32)
