@@ -8,12 +8,38 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any, Iterable
 
 from autograder.results import GradeResult, StubResult, result_to_dict
 
 RESULT_NAME, FEEDBACK_NAME, GRADESCOPE_NAME = "result.json", "feedback.md", "results.json"
+TERMINAL_MESSAGE_CHARS = 90
+"""A failure's message in the terminal summary is cut here (the feedback file has it whole)."""
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+_MARKDOWN = re.compile(r"([\\`*_{}\[\]()#+!|<>~])")
+
+
+def plain(text: str) -> str:
+    """``text`` without control characters (terminal escapes, carriage returns, bidirectional overrides):
+    messages quote a student's exception text, which must not rewrite a terminal or forge a line."""
+    return _CONTROL.sub("?", str(text))
+
+
+def markdown_text(text: str) -> str:
+    """``text`` shown literally in Markdown: no link, image, heading, HTML or emphasis a student could forge."""
+    return _MARKDOWN.sub(r"\\\1", plain(text)).replace("\n", "<br>")
+
+
+def _cell(text: str) -> str:
+    """A CSV cell that a spreadsheet shows as text, never runs as a formula."""
+    text = _one_line(text)
+    return "'" + text if text[:1] in ("=", "+", "-", "@") else text
+
+
+def _one_line(text: str) -> str:
+    return plain(text).replace("\n", " ⏎ ")
 
 
 def atomic_write(path: Path, text: str) -> None:
@@ -33,7 +59,7 @@ def _stub_output(stub: StubResult) -> str:
         mark = "✓" if test.passed else "✗"
         lines.append(f"{mark} {test.name} ({_fmt(test.points if test.passed else 0)}/{_fmt(test.points)})")
         if not test.passed:
-            lines.append(f"    {test.message}")
+            lines.append(f"    {plain(test.message)}")
             if test.hint:
                 lines.append(f"    hint: {test.hint}")
     return "\n".join(lines)
@@ -57,8 +83,8 @@ def gradescope_results(result: GradeResult) -> dict[str, Any]:
 def _overall_output(result: GradeResult) -> str:
     parts = []
     if result.error:
-        parts.append(f"This submission could not be graded automatically: {result.error}")
-    parts += result.notes
+        parts.append(f"This submission could not be graded automatically: {plain(result.error)}")
+    parts += [plain(n) for n in result.notes]
     if result.manual:
         total = sum(points for _, points in result.manual)
         parts.append(f"Written answers graded by hand later ({_fmt(total)} points): "
@@ -68,12 +94,12 @@ def _overall_output(result: GradeResult) -> str:
 
 def feedback_markdown(result: GradeResult) -> str:
     """The per-student feedback file: per stub, what passed, what failed and a hint."""
-    out = [f"# Feedback: {result.assignment} · {result.submission}", "",
+    out = [f"# Feedback: {result.assignment} · {markdown_text(result.submission)}", "",
            f"**Automatic score: {_fmt(result.score)} / {_fmt(result.max_score)}**", ""]
     if result.error:
-        out += [f"> This submission could not be graded automatically: {result.error}", ""]
+        out += [f"> This submission could not be graded automatically: {markdown_text(result.error)}", ""]
     for note in result.notes:
-        out.append(f"- note: {note}")
+        out.append(f"- note: {markdown_text(note)}")
     if result.notes:
         out.append("")
     for stub in result.stubs:
@@ -82,7 +108,7 @@ def feedback_markdown(result: GradeResult) -> str:
             if test.passed:
                 out.append(f"- ✓ {test.name}")
             else:
-                out.append(f"- ✗ {test.name}: {test.message}")
+                out.append(f"- ✗ {test.name}: {markdown_text(test.message)}")
                 if test.hint:
                     out.append(f"  - *hint:* {test.hint}")
         out.append("")
@@ -113,13 +139,13 @@ def summary_lines(result: GradeResult) -> list[str]:
     """A short per-stub table for the terminal."""
     if not result.has_score:
         return [f"{result.assignment} · {result.submission}: NOT GRADED: the grader failed, no score was given",
-                f"  {result.error}"]
+                f"  {_one_line(result.error or '')}"]
     width = max([len(s.name) for s in result.stubs] + [4])
     lines = [f"{result.assignment} · {result.submission}: {_fmt(result.score)}/{_fmt(result.max_score)}"
-             + (f"  (ungradable: {result.error})" if result.error else "")]
+             + (f"  (ungradable: {_one_line(result.error)})" if result.error else "")]
     for stub in result.stubs:
         failed = [t for t in stub.tests if not t.passed]
-        why = f"  {failed[0].message[:90]}" if failed else ""
+        why = f"  {_one_line(failed[0].message)[:TERMINAL_MESSAGE_CHARS]}" if failed else ""
         lines.append(f"  {stub.name:<{width}}  {_fmt(stub.score):>4}/{_fmt(stub.max_score):<4}{why}")
     return lines
 
@@ -132,12 +158,12 @@ def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str]
     rows = [["submission", "score", "max_score", "percent", *stubs, "status", "reason"]]
     for r in sorted(results, key=lambda r: r.submission):
         if not r.has_score:
-            rows.append([r.submission, "", "", "", *[""] * len(stubs), r.status, r.error or ""])
+            rows.append([r.submission, "", "", "", *[""] * len(stubs), r.status, _cell(r.error or "")])
             continue
         per = {s.name: s.score for s in r.stubs}
         percent = 100 * r.score / r.max_score if r.max_score else 0.0
         rows.append([r.submission, _fmt(r.score), _fmt(r.max_score), f"{percent:.1f}",
-                     *[_fmt(per.get(s, 0)) for s in stubs], r.status, r.error or ""])
+                     *[_fmt(per.get(s, 0)) for s in stubs], r.status, _cell(r.error or "")])
     tmp = path.with_name(f".{path.name}.tmp")
     path.parent.mkdir(parents=True, exist_ok=True)
     with tmp.open("w", newline="", encoding="utf-8") as f:

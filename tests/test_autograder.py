@@ -126,3 +126,24 @@ def test_a_lent_object_stays_in_the_grader(fx_grader):
             student.eval(forged, env=env)
     finally:
         session.close()
+
+
+def test_student_text_cannot_forge_the_terminal_the_feedback_or_the_gradebook(tmp_path):
+    """An exception message with terminal escapes, Markdown links and a formula is shown inert everywhere."""
+    import csv
+
+    from autograder.report import feedback_markdown, summary_lines, write_gradebook
+    from autograder.results import GradeResult, StubResult, TestOutcome
+
+    forged = "\x1b[2J\rscaled_sum 3/3\n# All passed [claim](http://example.com) <img src=x>"
+    result = GradeResult("fx", "=cmd|' /C calc'!A0", [StubResult("scaled_sum", [
+        TestOutcome("matches", "scaled_sum", 3, False, f"your code raised ValueError: {forged}")])], [],
+        notes=[f"several notebooks were submitted; graded {forged}"], error=None)
+    terminal = "\n".join(summary_lines(result))
+    assert "\x1b" not in terminal and "\r" not in terminal and terminal.count("\n") == 1
+    markdown = feedback_markdown(result)
+    assert "\x1b" not in markdown and "](http" not in markdown and "<img" not in markdown.replace("\\<", "")
+    assert "\n# All passed" not in markdown and "\\# All passed" in markdown
+    write_gradebook([GradeResult("fx", "x", [], [], error="=HYPERLINK(1)", status="ungradable")], tmp_path / "g.csv")
+    row = next(csv.DictReader((tmp_path / "g.csv").open()))
+    assert row["reason"].startswith("'=")
