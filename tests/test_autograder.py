@@ -1,7 +1,6 @@
 """The grading model end to end: full marks, zero, exact partial credit, handles, isolation."""
 from __future__ import annotations
 
-import json
 
 import pytest
 
