@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from rlcourse.envs import make_envs
+from rlcourse.progress import progress as progress_bar
 
 PolicyFn = Callable[[np.ndarray], np.ndarray]
 """Maps a batch of observations ``(n, obs_dim)`` to a batch of actions ``(n, act_dim)``."""
@@ -57,7 +57,8 @@ def rollout(
     """Run ``n_episodes`` episodes of ``policy`` in parallel, seeded ``seed, seed+1, ...``.
 
     The same seed and a deterministic policy give the same episodes.
-    ``progress=None`` shows a bar only for long runs (over 10,000 env steps).
+    ``progress=None`` reports progress only for long runs (over 10,000 env steps): a bar at a terminal
+    or in a notebook, a plain line every few seconds in a log (:func:`rlcourse.progress.progress`).
     """
     envs = make_envs(n_episodes, env_id, same_step_reset=False, **env_kwargs)  # no auto-reset is relied on
     horizon = max_steps or envs.envs[0].spec.max_episode_steps or 1000
@@ -69,7 +70,7 @@ def rollout(
     alive = np.ones(n_episodes, dtype=bool)
     terminated_any = np.zeros(n_episodes, dtype=bool)
     show = progress if progress is not None else n_episodes * horizon > 10_000
-    for t in tqdm(range(horizon), disable=not show, desc=f"rollout {env_id}", leave=False):
+    for t in progress_bar(range(horizon), desc=f"rollout {env_id}", disable=not show):
         actions = np.asarray(policy(obs), dtype=np.float32)
         obs_buf[:, t], act_buf[:, t], mask[:, t] = obs, actions, alive
         obs, reward, terminated, truncated, _ = envs.step(actions)
