@@ -1,9 +1,11 @@
 """Shipped datasets, verified against ``datasets/MANIFEST.json`` on every load.
 
-Each entry of the MANIFEST records a file's sha256, size, the command that
-regenerates it and its seed (plus free-form ``info``, e.g. an expert's measured
+Each entry of the MANIFEST records a file's sha256, size, the exact command that
+made it and its seed (plus free-form ``info``, e.g. an expert's measured
 return). Loaders refuse a missing, truncated or altered file with a message
-that names the file and the fix; nothing is ever downloaded.
+that names the file and the fix; nothing is ever downloaded. The scripts in
+``datasets/scripts/`` record what they write with :func:`record`, so the command
+is the one that was run, argument for argument.
 
 Command line::
 
@@ -16,13 +18,15 @@ import argparse
 import hashlib
 import json
 import os
+import shlex
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
-DATASETS = Path(os.environ.get("RLCOURSE_DATASETS", Path(__file__).resolve().parents[1] / "datasets"))
+REPO = Path(__file__).resolve().parents[1]
+DATASETS = Path(os.environ.get("RLCOURSE_DATASETS", REPO / "datasets"))
 MANIFEST_NAME = "MANIFEST.json"
 
 
@@ -104,6 +108,24 @@ def add(path: str | Path, command: str, seed: int | None, info_: dict[str, Any] 
                      "seed": seed, "info": info_ or {}}
     _write_manifest(entries, root)
     return entries[name]
+
+
+def script_command(script: str | Path, argv: Sequence[str] | None = None) -> str:
+    """The command that runs ``script`` with the arguments ``argv`` (default: this process's, ``sys.argv[1:]``),
+    as typed in the repository root: ``python datasets/scripts/make_items.py --seed 0``, quoted by ``shlex.join``."""
+    path = Path(script).resolve()
+    shown = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else str(path)
+    return "python " + shlex.join([shown, *(sys.argv[1:] if argv is None else argv)])
+
+
+def record(path: str | Path, script: str | Path, argv: Sequence[str] | None = None, *, seed: int | None,
+           info: dict[str, Any] | None = None, root: Path = DATASETS) -> dict[str, Any]:
+    """Record ``path`` in the MANIFEST as made by running ``script`` with ``argv`` (see :func:`script_command`).
+
+    A script calls ``record(out, __file__, argv, seed=args.seed, info=...)`` with the ``argv`` its parser read
+    (``None`` when it read the command line), so the MANIFEST holds the exact command, not a summary of it.
+    """
+    return add(path, script_command(script, argv), seed, info, root)
 
 
 def remove(name: str, root: Path = DATASETS) -> None:

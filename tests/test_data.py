@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import shlex
+import sys
 
 import numpy as np
 import pytest
@@ -56,3 +58,20 @@ def test_unlisted_files(root):
 def test_the_shipped_manifest_verifies():
     assert data.check_all() == []
     assert json.loads((data.DATASETS / "MANIFEST.json").read_text())["files"] is not None
+
+
+def test_record_writes_the_exact_command_quoted_and_relative_to_the_repository(root, monkeypatch):
+    script = data.REPO / "datasets" / "scripts" / "make_items.py"
+    np.savez(root / "other.npz", x=np.zeros(2))
+    entry = data.record(root / "other.npz", script, ["--note", "it's two words", "--seed", "4"], seed=4, root=root)
+    assert entry["command"] == "python datasets/scripts/make_items.py --note 'it'\"'\"'s two words' --seed 4"
+    assert shlex.split(entry["command"])[3] == "it's two words" and data.info("other.npz", root)["seed"] == 4
+    monkeypatch.setattr(sys, "argv", ["/anywhere/make_items.py", "--seed", "0"])
+    assert data.script_command(script) == "python datasets/scripts/make_items.py --seed 0"
+
+
+def test_every_shipped_command_is_a_whole_command_line_of_a_script_in_the_repository():
+    for name, entry in data.read_manifest().items():
+        words = shlex.split(entry["command"])
+        assert words[0] == "python" and "..." not in words, f"{name}: {entry['command']}"
+        assert (data.REPO / words[1]).is_file(), f"{name}: {words[1]} does not exist"

@@ -34,14 +34,14 @@ def record(env_id: str, expert_file: str, n_episodes: int, seed: int) -> Demonst
     return Demonstrations.from_episodes(rollout(expert.act, env_id, n_episodes, seed, progress=False))
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", required=True, help="gymnasium id, e.g. Hopper-v5")
     parser.add_argument("--expert", required=True,
                         help="the expert policy file, relative to datasets/ (checked against the MANIFEST) or a path")
     parser.add_argument("--episodes", type=int, default=25)
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     demos = record(args.env, args.expert, args.episodes, args.seed)
     target = data.DATASETS / "demos" / f"{args.env}.npz"
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -49,15 +49,13 @@ def main() -> None:
                         rewards=demos.rewards.astype(np.float32), lengths=demos.lengths.astype(np.int64),
                         terminated=demos.terminated.astype(bool))
     returns = demos.returns
-    command = (f"python datasets/scripts/make_demos.py --env {args.env} --expert {args.expert} "
-               f"--episodes {args.episodes} --seed {args.seed}")
     info = {"env": args.env, "expert": args.expert, "episodes": args.episodes, "steps": int(demos.lengths.sum()),
             "return_mean": round(float(returns.mean()), 1), "return_std": round(float(returns.std()), 1),
             "terminated": int(demos.terminated.sum())}
     expert_entry = data.read_manifest().get(args.expert)
     if expert_entry is not None:
         info["expert_sha256"] = expert_entry["sha256"]
-    data.add(target, command=command, seed=args.seed, info_=info)
+    data.record(target, __file__, argv, seed=args.seed, info=info)
     print(f"{target.relative_to(data.DATASETS.parent)}: {args.episodes} episodes, {info['steps']} steps, "
           f"return {info['return_mean']:.0f} ± {info['return_std']:.0f}, {target.stat().st_size / 1e6:.2f} MB")
 

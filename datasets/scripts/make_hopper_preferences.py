@@ -172,15 +172,7 @@ def main(argv: list[str] | None = None) -> None:
           f"label agreement {info['label_agreement_with_true_return']:.3f}, Bayes ceiling "
           f"{info['bayes_ceiling_test']:.3f} (expected {info['bayes_ceiling_test_expected']:.3f}), {size_mb:.1f} MB")
     if not args.no_record:
-        command = "python datasets/scripts/make_hopper_preferences.py " + " ".join(
-            ["--checkpoints", *info["checkpoints"], "--noise-stds", *map(str, args.noise_stds)]
-            + (["--random-policy"] if args.random_policy else [])
-            + [f"--episodes {args.episodes} --max-steps {args.max_steps} --test-fraction {args.test_fraction}",
-               f"--segment-length {L} --segments-per-source {args.segments_per_source} --rollout-steps {args.rollout_steps}",
-               f"--n-train-pairs {args.n_train_pairs} --n-test-pairs {args.n_test_pairs}",
-               f"--temperature {args.temperature} --flip-rate {args.flip_rate} --log-theta {args.log_theta}",
-               f"--seed {args.seed}"])
-        data.add(out, command, args.seed, info)
+        data.record(out, __file__, argv, seed=args.seed, info=info)
 
 
 if __name__ == "__main__":

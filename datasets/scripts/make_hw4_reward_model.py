@@ -92,10 +92,7 @@ def main(argv: list[str] | None = None) -> None:
     save_reward_model(ensemble, OUT, **meta)
     print({k: v for k, v in meta.items() if k != "data"})
     if not args.no_record:
-        command = (f"python datasets/scripts/make_hw4_reward_model.py --members {args.members} "
-                   f"--hidden {' '.join(map(str, args.hidden))} --steps {args.steps} --batch-size {args.batch_size} "
-                   f"--lr {args.lr:g} --weight-decay {args.weight_decay:g} --seed {args.seed}")
-        data.add(OUT, command, args.seed, meta)
+        data.record(OUT, __file__, argv, seed=args.seed, info=meta)
     print(f"wrote {OUT.relative_to(data.DATASETS.parent)}")
 
 

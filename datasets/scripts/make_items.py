@@ -11,7 +11,6 @@ centred to mean zero (utilities are identified only up to an additive constant).
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
@@ -42,8 +41,6 @@ def main(argv: list[str] | None = None) -> None:
     comp_path, util_path = OUT / "comparisons.npz", OUT / "true_utilities.npz"
     np.savez_compressed(comp_path, i=pairs[:, 0].astype(np.int16), j=pairs[:, 1].astype(np.int16), mu=mu)
     np.savez_compressed(util_path, utilities=utilities)
-    command = ("python datasets/scripts/make_items.py " + f"--n-items {args.n_items} --n-comparisons {args.n_comparisons} "
-               f"--utility-std {args.utility_std} --log-theta {args.log_theta} --seed {args.seed}")
     info = {"n_items": args.n_items, "n_comparisons": args.n_comparisons, "utility_std": args.utility_std,
             "tie_model": "Rao-Kupper: P(i>j)=sigmoid(d-eta), P(j>i)=sigmoid(-d-eta), P(tie)=rest, d=u_i-u_j",
             "log_theta": args.log_theta, "theta": float(np.exp(args.log_theta)),
@@ -52,9 +49,9 @@ def main(argv: list[str] | None = None) -> None:
             "expected_tie_fraction": round(float(tie.mean()), 4),
             "pair_sampling": "uniform over distinct items, with repetition",
             "utilities_file": "items/true_utilities.npz"}
-    data.add(comp_path, command, args.seed, info)
-    data.add(util_path, command, args.seed, {"n_items": args.n_items, "centred": True,
-                                              "comparisons_file": "items/comparisons.npz"})
+    data.record(comp_path, __file__, argv, seed=args.seed, info=info)
+    data.record(util_path, __file__, argv, seed=args.seed,
+                info={"n_items": args.n_items, "centred": True, "comparisons_file": "items/comparisons.npz"})
     print(f"{args.n_comparisons} comparisons among {args.n_items} items, {info['tie_fraction']:.1%} ties -> {OUT}")
 
 

@@ -29,13 +29,13 @@ PROMPT_LEN = 5
 TEMPERATURE = 0.25
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--train", type=int, default=3000)
     p.add_argument("--test", type=int, default=500)
     p.add_argument("--eval-prompts", type=int, default=256)
     p.add_argument("--seed", type=int, default=1)
-    args = p.parse_args()
+    args = p.parse_args(argv)
     torch.set_num_threads(1)
     seed_everything(args.seed)
     sft = load_lm(data.verify("lm/sft.pt"))
@@ -63,7 +63,7 @@ def main() -> None:
     info = {"pairs_train": args.train, "pairs_test": args.test, "eval_prompts": args.eval_prompts,
             "annotator_temperature": TEMPERATURE, "label_agreement_with_gold": round(agreement, 4),
             "tied_gold_pairs": int((~differ).sum()), "sft_gold_mean": round(float(np.r_[ga, gb].mean()), 4)}
-    data.add(out, command="python datasets/scripts/make_lm_preferences.py", seed=args.seed, info_=info)
+    data.record(out, __file__, argv, seed=args.seed, info=info)
     print(info)
 
 

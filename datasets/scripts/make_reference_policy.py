@@ -15,7 +15,6 @@ metadata and the MANIFEST entry; the file is ``datasets/hw4/reference_policy.pt`
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -79,10 +78,7 @@ def main(argv: list[str] | None = None) -> None:
                 eval_episodes=20, eval_seed=1000, demo_pairs=int(len(obs)))
     save_policy(policy, OUT, **meta)
     if not args.no_record:
-        command = (f"python datasets/scripts/make_reference_policy.py --teacher {args.teacher} --episodes {args.episodes} "
-                   f"--hidden {' '.join(map(str, args.hidden))} --steps {args.steps} --batch-size {args.batch_size} "
-                   f"--lr {args.lr} --seed {args.seed}")
-        data.add(OUT, command, args.seed, meta)
+        data.record(OUT, __file__, argv, seed=args.seed, info=meta)
     print(f"wrote {OUT.relative_to(data.DATASETS.parent)}")
 
 

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
 
-from rlcourse.data import DATASETS, add
+from rlcourse.data import DATASETS, record
 from rlcourse.roads import RoadNetwork
 
 SIDE = 16
@@ -81,10 +81,10 @@ def make_routes(net: RoadNetwork, rng: np.random.Generator) -> dict[str, np.ndar
             "offsets": np.concatenate([[0], np.cumsum(lengths)]), "test": test, "true_weights": TRUE_WEIGHTS}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     net = make_network(rng)
     routes = make_routes(net, rng)
@@ -93,12 +93,11 @@ def main() -> None:
     np.savez_compressed(out / "network.npz", xy=net.xy, tail=net.tail, head=net.head,
                         road_class=net.road_class, toll=net.toll)
     np.savez_compressed(out / "routes.npz", **routes)
-    command = f"python datasets/scripts/make_roads.py --seed {args.seed}"
-    add(out / "network.npz", command, args.seed,
-        {"intersections": net.n_nodes, "segments": net.n_edges, "transitions": int(net.trans_from.size)})
-    add(out / "routes.npz", command, args.seed,
-        {"routes": N_ROUTES, "destinations": N_DESTINATIONS, "held_out": int(routes["test"].sum()),
-         "mean_segments": float(np.diff(routes["offsets"]).mean())})
+    record(out / "network.npz", __file__, argv, seed=args.seed,
+           info={"intersections": net.n_nodes, "segments": net.n_edges, "transitions": int(net.trans_from.size)})
+    record(out / "routes.npz", __file__, argv, seed=args.seed,
+           info={"routes": N_ROUTES, "destinations": N_DESTINATIONS, "held_out": int(routes["test"].sum()),
+                 "mean_segments": float(np.diff(routes["offsets"]).mean())})
     print(f"{net.n_nodes} intersections, {net.n_edges} segments, {net.trans_from.size} transitions; "
           f"{N_ROUTES} routes, mean {np.diff(routes['offsets']).mean():.1f} segments")
 

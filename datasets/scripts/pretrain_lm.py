@@ -20,6 +20,7 @@ import torch
 import torch.nn.functional as F
 
 from rlcourse import data, reviews
+from rlcourse.checkpoint import atomic_save
 from rlcourse.lm import LMConfig, TinyLM, generate, save_lm
 from rlcourse.seeding import seed_everything
 
@@ -49,7 +50,7 @@ def evaluate(model: TinyLM, valid: torch.Tensor, seed: int) -> dict[str, float]:
             "sample_unfinished": float(terms.unfinished.mean())}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--reviews", type=int, default=50_000, help="training reviews sampled from the grammar")
     p.add_argument("--steps", type=int, default=1500)
@@ -59,7 +60,7 @@ def main() -> None:
     p.add_argument("--ckpt-every", type=int, default=250)
     p.add_argument("--out", type=Path, default=REPO / "datasets" / "lm")
     p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a busy 2-core machine)")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     ckpt_path = args.out / "pretrain_ckpt.tmp"
@@ -97,8 +98,8 @@ def main() -> None:
             rate = tokens_seen / (time.time() - t_start)
             print(f"step {step} loss {loss.item():.3f} ({rate:,.0f} tokens/s)", flush=True)
         if step % args.ckpt_every == 0 or step == args.steps:
-            torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
-                        "step": step, "elapsed": elapsed + time.time() - t_start}, ckpt_path)
+            atomic_save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
+                         "step": step, "elapsed": elapsed + time.time() - t_start}, ckpt_path)
     elapsed += time.time() - t_start
     metrics = evaluate(model, valid, seed=args.seed)
     print({k: round(v, 4) for k, v in metrics.items()}, f"train time {elapsed / 60:.1f} min", flush=True)
@@ -106,9 +107,9 @@ def main() -> None:
     save_lm(model.eval(), out, **{k: round(v, 4) for k, v in metrics.items()}, train_minutes=round(elapsed / 60, 2),
             steps=args.steps, seed=args.seed)
     if args.out.resolve() == (REPO / "datasets" / "lm").resolve():
-        data.add(out, command="python datasets/scripts/pretrain_lm.py", seed=args.seed,
-                 info_={"params": model.n_params(), **{k: round(v, 4) for k, v in metrics.items()},
-                        "train_minutes": round(elapsed / 60, 2), "steps": args.steps, "batch": args.batch})
+        data.record(out, __file__, argv, seed=args.seed,
+                    info={"params": model.n_params(), **{k: round(v, 4) for k, v in metrics.items()},
+                          "train_minutes": round(elapsed / 60, 2), "steps": args.steps, "batch": args.batch})
     ckpt_path.unlink(missing_ok=True)
 
 

@@ -6,8 +6,8 @@ outside the repository and is saved every ``--checkpoint-every`` steps, so a
 run that is cut off resumes where it stopped when started again with the same
 arguments. At every checkpoint the actor is exported to the ``rlcourse``
 policy format under ``datasets/experts/<env>/`` (a few hundred kB), with its
-measured return: these snapshots of increasing skill feed the preference data
-sets later.
+measured return and the command of the session that wrote it: these snapshots
+of increasing skill feed the preference data sets later.
 
 SAC is sample-efficient but slow per step here (about 100 steps/s on a core);
 PPO with vectorised environments runs about 30 times more steps per second,
@@ -32,6 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
+from rlcourse.data import script_command
 from rlcourse.nets import GaussianPolicy, save_policy
 from rlcourse.rollouts import evaluate
 
@@ -78,10 +79,11 @@ def export_actor(model: SAC | PPO) -> GaussianPolicy:
 class Checkpoint(BaseCallback):
     """Every ``every`` steps: save trainer state atomically, export and evaluate the actor, log a CSV row."""
 
-    def __init__(self, env_id: str, every: int, state_dir: Path, export_dir: Path, eval_episodes: int, t0: float):
+    def __init__(self, env_id: str, every: int, state_dir: Path, export_dir: Path, eval_episodes: int, t0: float,
+                 command: str):
         super().__init__()
         self.env_id, self.every, self.state_dir, self.export_dir = env_id, every, state_dir, export_dir
-        self.eval_episodes, self.t0 = eval_episodes, t0
+        self.eval_episodes, self.t0, self.command = eval_episodes, t0, command
         self.last = None
 
     def _on_step(self) -> bool:
@@ -95,7 +97,7 @@ class Checkpoint(BaseCallback):
             hours = (time.time() - self.t0) / 3600
             save_policy(policy, self.export_dir / f"ckpt_{self.num_timesteps:07d}.pt", env_id=self.env_id,
                         steps=self.num_timesteps, eval_return=mean, eval_return_std=std,
-                        eval_episodes=self.eval_episodes)
+                        eval_episodes=self.eval_episodes, command=self.command)
             log = self.state_dir / "progress.csv"
             new = not log.exists()
             with log.open("a", newline="") as f:
@@ -146,7 +148,7 @@ def load_or_create(args: argparse.Namespace, state_dir: Path) -> SAC | PPO:
     return model
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", required=True, help="gymnasium id, e.g. Hopper-v5")
     parser.add_argument("--steps", type=int, default=1_000_000, help="total environment steps")
@@ -158,7 +160,7 @@ def main() -> None:
     parser.add_argument("--subproc", action="store_true", help="PPO: step the environments in parallel processes "
                         "(faster on many cores; slower than in-process stepping on two)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (two runs side by side: 1 each)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     torch.set_num_threads(args.threads)
     run = args.algo if args.seed == 0 else f"{args.algo}-seed{args.seed}"
@@ -170,7 +172,7 @@ def main() -> None:
     if remaining > 0:
         model.learn(remaining, reset_num_timesteps=False,
                     callback=Checkpoint(args.env, args.checkpoint_every, state_dir, export_dir,
-                                        args.eval_episodes, time.time()))
+                                        args.eval_episodes, time.time(), script_command(__file__, argv)))
     print(f"{args.env}: done at {model.num_timesteps} steps", flush=True)
 
 
