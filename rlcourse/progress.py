@@ -8,6 +8,7 @@ ends before the first interval writes nothing.
 """
 from __future__ import annotations
 
+import importlib.util
 import sys
 import time
 from typing import Iterable, Iterator, Optional, TextIO, TypeVar
@@ -59,13 +60,7 @@ def _watched_by(stream: Optional[TextIO]) -> Optional[str]:
 def _in_jupyter_kernel() -> bool:
     """Whether this process is a Jupyter kernel that can draw tqdm's widget (ipywidgets installed)."""
     shell = getattr(sys.modules.get("IPython"), "get_ipython", lambda: None)()
-    if type(shell).__name__ != "ZMQInteractiveShell":
-        return False
-    try:
-        import ipywidgets  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    return type(shell).__name__ == "ZMQInteractiveShell" and importlib.util.find_spec("ipywidgets") is not None
 
 
 def _log_lines(iterable: Iterable[T], desc: str, total: Optional[int], interval: float,
