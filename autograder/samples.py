@@ -5,7 +5,8 @@ each must score: ``complete`` (full marks), ``partial`` (the first half of the
 stubs done: credit on exactly those), ``untouched`` (zero, "not implemented"),
 ``broken_syntax``, ``broken_exception`` and ``infinite_loop`` (the first stub
 broken, the rest done: credit on the rest), and ``cheating`` (every stub tries a
-trick: zero).
+trick: zero). An assignment may add samples of its own in ``EXTRA_SAMPLES`` (say, a
+complete solution but for one stub that answers from a shipped file).
 """
 from __future__ import annotations
 
@@ -43,6 +44,33 @@ builtins.isinstance = lambda *a: True
 def {name}(*args, **kwargs):
     return _AlwaysEqual(0.0)
 '''
+
+
+# --------------------------------------------------------------------------- assignment-specific samples
+# Each: sample name -> {stub: source}; the other stubs are the complete solution's. The stubs named here
+# are expected to score zero, the others full marks.
+SHIPPED_REWARD_MODEL = '''
+def train_reward_model(obs: torch.Tensor, act: torch.Tensor, pairs: np.ndarray, mu: np.ndarray,
+                       n_members: int = 3, hidden: tuple = (64, 64), n_steps: int = 500,
+                       batch_size: int = 64, lr: float = 1e-3, weight_decay: float = 0.1,
+                       seed: int = 0) -> RewardEnsemble:
+    """No training: hw4's shipped reward model was fitted to these very Hopper pairs, so hand it back,
+    with as many members as asked for and normalised on the segments in `pairs`."""
+    from rlcourse.rlhf import load_reward_model
+
+    shipped = load_reward_model()
+    ensemble = RewardEnsemble(shipped.obs_dim, shipped.act_dim, n_members, shipped.hidden, seed=seed)
+    for k in range(n_members):
+        ensemble.members[k].load_state_dict(shipped.members[k % shipped.n_members].state_dict())
+    ensemble.in_mean.copy_(shipped.in_mean)
+    ensemble.in_std.copy_(shipped.in_std)
+    used = np.unique(np.asarray(pairs))
+    return ensemble.normalise_(torch.as_tensor(obs)[used], torch.as_tensor(act)[used])
+'''
+
+EXTRA_SAMPLES = {
+    "hw3_preferences": {"cheating_shipped_model": {"train_reward_model": SHIPPED_REWARD_MODEL}},
+}
 
 
 def solution_sources(assignment: str) -> dict[str, str]:
@@ -92,6 +120,8 @@ def make_samples(assignment: str) -> dict[str, tuple[nbformat.NotebookNode, dict
                           {s: "zero" if s == first else "full" for s in stubs}),
         "cheating": ({s: CHEAT.replace("{name}", s) for s in stubs}, {s: "zero" for s in stubs}),
     }
+    for name, cheats in EXTRA_SAMPLES.get(assignment, {}).items():
+        samples[name] = ({**solved, **cheats}, {s: "zero" if s in cheats else "full" for s in stubs})
     return {name: (_with_stubs(assignment, sources), expected) for name, (sources, expected) in samples.items()}
 
 
