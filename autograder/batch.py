@@ -15,13 +15,13 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from tqdm.auto import tqdm
 
 from autograder import course
 from autograder.grader import Grader
 from autograder.notebook import NotebookError, find_stubs, read_submission
 from autograder.report import RESULT_NAME, write_gradebook, write_outputs
 from autograder.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, result_from_dict
+from rlcourse.progress import progress as shown_progress
 
 GRADEBOOK_NAME = "gradebook.csv"
 
@@ -167,8 +167,6 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):
             write_outputs(_ungradable(assignment, e, e.problem), out_dir / e.name)
-    bar = tqdm(total=len(entries), initial=len(entries) - len(todo), desc=f"grading {assignment}",
-               unit="submission", disable=not progress)
     attempts = 0
     while todo and attempts < 3:
         attempts += 1
@@ -176,7 +174,9 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
             with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=_init,
                                      initargs=(assignment,)) as pool:
                 futures = {pool.submit(_grade_one, e, str(out_dir), assignment): e for e in todo}
-                for future in as_completed(futures):
+                # A bar in a terminal, a line every few seconds in a log (CI, make demo > file).
+                for future in shown_progress(as_completed(futures), desc=f"grading {assignment}", total=len(futures),
+                                             disable=not progress):
                     entry = futures[future]
                     try:
                         future.result()
@@ -185,15 +185,12 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
                     except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission, nor grade it
                         write_outputs(_grader_error(assignment, entry, f"internal grader error: {err}"),
                                       out_dir / entry.name)
-                    bar.update(1)
         except BrokenProcessPool:
             pass  # a grading process died; the finished results are on disk, retry the rest
         todo = [e for e in todo if _load(out_dir, e.name) is None]
     for e in todo:
         write_outputs(_grader_error(assignment, e, "the grading process died repeatedly on this submission"),
                       out_dir / e.name)
-        bar.update(1)
-    bar.close()
     results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
     write_gradebook(results, out_dir / GRADEBOOK_NAME, expected)
     return results
