@@ -1,4 +1,6 @@
 """Hidden tests of deep_maxent_irl (its quality is judged against the reference's on the same data)."""
+import dataclasses
+
 import numpy as np
 
 from autograder.suite import stub
@@ -9,9 +11,19 @@ HINT = ("Per iteration: reward = net(features); soft policy and visitation for i
 _CACHE = {}
 
 
+def _hidden_reward(world, size):
+    """A reward of the objects that rlcourse does not define: +1 within 2.5 cells of colour 2 unless within 2 of
+    colour 3, -1 within 2 of colour 3. The library's object_grid documents (and computes) its own rule, so a
+    stub that read the reward off the features with that rule, or regenerated the world, would learn nothing."""
+    distance = world.features * size * np.sqrt(2)          # object_grid scales distances by the diagonal
+    near2, near3 = distance[:, 2] <= 2.5, distance[:, 3] <= 2.0
+    return np.where(near2 & ~near3, 1.0, np.where(near3, -1.0, 0.0))
+
+
 def _world():
     if "world" not in _CACHE:
         world = object_grid(size=8, horizon=14, n_objects=8, seed=2)
+        world = dataclasses.replace(world, true_reward=_hidden_reward(world, 8))   # the expert follows this one
         _CACHE["world"] = world, world.sample_expert(300, np.random.default_rng(0))
     return _CACHE["world"]
 

@@ -53,10 +53,13 @@ def test_reaches_the_maximum_likelihood(student, reference):
 
 
 @stub("fit_route_weights", points=1, hint=HINT)
-def test_history_rises(student):
-    """The recorded log-likelihood starts at w = 0 and ends higher"""
+def test_history_rises(student, reference):
+    """The recorded log-likelihood starts at its value at w = 0 and ends higher"""
     net, feats, origins, destinations = _data(n=20)
     _, hist = _call(student, net, feats, origins, destinations, 30)
     hist = np.asarray(hist, dtype=float)
     assert hist.ndim == 1 and hist.size >= 2, f"the history should be a 1-D array of log-likelihoods, got shape {hist.shape}"
+    at_zero, _ = _loglik_and_gradient(reference, net, np.zeros(feats.shape[1]), feats, origins, destinations, 30)
+    assert np.isclose(hist[0], at_zero, rtol=1e-6), \
+        f"the first entry should be the mean log-likelihood at w = 0, {at_zero:.4f}; got {hist[0]:.4f}"
     assert hist[-1] > hist[0], f"the log-likelihood went from {hist[0]:.3f} to {hist[-1]:.3f}"

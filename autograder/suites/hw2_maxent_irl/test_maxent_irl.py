@@ -6,12 +6,17 @@ import numpy as np
 from autograder.suite import check_array, stub
 from rlcourse.gridworld import random_mdp, sample_trajectories
 
+HIDDEN = 58_203   # seeds the reward weights; the suite is not released
 HINT = ("Start at w = 0; gradient mu_D - phi^T D(w) with D from your backward and forward passes; the adaptive "
         "step of the docstring; stop when |g| <= tol |mu_D|. Return (w, {'grad_norm': ..., 'log_likelihood': ...}).")
 
 
 def _problem(reference, seed, n_demos, n_states=20, horizon=10):
+    """A random MDP whose reward weights are drawn here: random_mdp would regenerate its own weights from the
+    seed, so a stub could search seeds for the features it is given and return them."""
     m = random_mdp(n_states, 4, 3, horizon, seed=seed)
+    weights = np.random.default_rng([HIDDEN, seed]).normal(size=3)
+    m = dataclasses.replace(m, true_weights=weights, true_reward=m.features @ weights)
     expert = reference.soft_value_iteration(m.P, m.true_reward, m.horizon)
     demos = sample_trajectories(m.P, expert, m.p0, n_demos, np.random.default_rng(seed))
     return m, expert, demos
@@ -69,10 +74,14 @@ def test_history_starts_at_zero_weights(student, reference):
 
 @stub("maxent_irl", points=1, hint=HINT)
 def test_log_likelihood_rises(student, reference):
-    """The recorded log-likelihood ends higher than it starts, and grad_norm ends below tol"""
+    """The recorded log-likelihood rises, and the returned weights meet the stopping rule |g| <= tol |mu_D|"""
     m, _, demos = _problem(reference, 5, 400)
-    _, hist = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions, n_iters=2000, tol=1e-4)
+    w, hist = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions, n_iters=2000, tol=1e-4)
     ll, gn = np.asarray(hist["log_likelihood"]), np.asarray(hist["grad_norm"])
     assert ll[-1] > ll[0], f"log-likelihood went from {ll[0]:.3f} to {ll[-1]:.3f}"
     mu_d = reference.feature_expectations(demos.states, m.features)
     assert gn[-1] <= 1e-4 * np.linalg.norm(mu_d) * 1.0001, f"stopped with |g| = {gn[-1]:.2e} above tol |mu_D|"
+    assert np.shape(w) == (3,), f"the weights should have shape (F,) = (3,), got {np.shape(w)}"
+    g = np.linalg.norm(mu_d - _model_features(reference, m, w)[0])
+    assert g <= 1e-4 * np.linalg.norm(mu_d) * 1.01, (f"at the returned weights |g| = {g:.2e}, above tol |mu_D|: "
+                                                     "the history should describe the weights you return")

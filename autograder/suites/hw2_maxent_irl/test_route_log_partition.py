@@ -1,4 +1,9 @@
-"""Hidden tests of route_log_partition (brute-force enumeration and the reference)."""
+"""Hidden tests of route_log_partition (brute-force enumeration and the reference).
+
+rlcourse ships the brute force (``enumerate_routes``), so each test that checks against it also asks for
+log Z on a 5 x 5 grid at horizon 30, whose routes are far too many to enumerate (a 4 x 4 grid at horizon
+12 already has 39,816), checked against the reference: only the soft backward pass gets through.
+"""
 import numpy as np
 import torch
 from scipy.special import logsumexp
@@ -21,9 +26,20 @@ def _brute(net, w, origin, destination, horizon):
     return logsumexp([net.route_features(r) @ w for r in enumerate_routes(net, origin, destination, horizon)])
 
 
+BIG = grid_network(5, 5, seed=9)
+BIG_TRIPS = dict(origins=np.array([0, 3, 24, 12]), destinations=np.array([24, 20, 0, 4]), horizon=30)
+
+
+def _check_too_big_to_enumerate(student, reference, w, expr=CALL, name="log Z"):
+    """The same call on the 5 x 5 grid at horizon 30, against the reference."""
+    args = dict(w=w, **BIG_TRIPS, **_arrays(BIG))
+    check_tensor(student.eval(expr, **args), reference.eval(expr, **args), rtol=1e-7, atol=1e-9,
+                 name=f"{name} on a 5 x 5 grid at horizon 30 (too many routes to enumerate)")
+
+
 @stub("route_log_partition", points=2, hint=HINT)
-def test_matches_brute_force(student, rng):
-    """On a 2 x 3 and a 3 x 3 grid, several origin-destination pairs at once, horizons 5 and 7"""
+def test_matches_brute_force(student, reference, rng):
+    """On a 2 x 3 and a 3 x 3 grid, several origin-destination pairs at once, horizons 5 and 7; and a 5 x 5 grid"""
     for rows, cols, horizon in ((2, 3, 7), (3, 3, 5)):
         net = grid_network(rows, cols, seed=rows)
         w = -rng.uniform(0.2, 2.0, size=7)
@@ -31,16 +47,18 @@ def test_matches_brute_force(student, rng):
         want = torch.tensor([_brute(net, w, o, d, horizon) for o, d in zip(origins, destinations)])
         got = student.eval(CALL, w=w, origins=origins, destinations=destinations, horizon=horizon, **_arrays(net))
         check_tensor(got, want, rtol=1e-7, atol=1e-9, name=f"log Z on a {rows} x {cols} grid (H = {horizon})")
+    _check_too_big_to_enumerate(student, reference, -rng.uniform(0.2, 2.0, size=7))
 
 
 @stub("route_log_partition", points=1, hint=HINT)
-def test_positive_weights_and_loops(student, rng):
+def test_positive_weights_and_loops(student, reference, rng):
     """Weights that make loops attractive stay finite (routes are capped at H segments)"""
     net = grid_network(2, 2, seed=0)
     w = rng.uniform(0.1, 1.0, size=7)
     want = torch.tensor([_brute(net, w, 0, 3, 6)])
     got = student.eval(CALL, w=w, origins=np.array([0]), destinations=np.array([3]), horizon=6, **_arrays(net))
     check_tensor(got, want, rtol=1e-7, name="log Z with positive rewards")
+    _check_too_big_to_enumerate(student, reference, rng.uniform(0.1, 1.0, size=7), name="log Z with positive rewards")
 
 
 @stub("route_log_partition", points=1, hint=HINT)
@@ -56,8 +74,8 @@ def test_shipped_network_matches_reference(student, reference, rng):
 
 
 @stub("route_log_partition", points=1, hint=HINT)
-def test_gradient_is_expected_features(student, rng):
-    """Autograd through log Z gives the expected route features (brute force)"""
+def test_gradient_is_expected_features(student, reference, rng):
+    """Autograd through log Z gives the expected route features (brute force; and the reference on a 5 x 5 grid)"""
     net = grid_network(2, 3, seed=4)
     w = -rng.uniform(0.2, 2.0, size=7)
     routes = enumerate_routes(net, 0, 5, 6)
@@ -67,3 +85,4 @@ def test_gradient_is_expected_features(student, rng):
             ".sum(), wt)[0]")
     got = student.eval(expr, w=w, origins=np.array([0]), destinations=np.array([5]), horizon=6, **_arrays(net))
     check_tensor(got, torch.tensor(p @ feats), rtol=1e-6, atol=1e-9, name="the gradient of log Z")
+    _check_too_big_to_enumerate(student, reference, -rng.uniform(0.2, 2.0, size=7), expr=expr, name="the gradient of log Z")
