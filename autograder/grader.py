@@ -38,7 +38,7 @@ SANDBOX_HELPERS = "sandbox_helpers.py"
 SUITE_LOG_CHARS = 3000
 """The end of pytest's own output quoted when a suite cannot run (the traceback that matters is last)."""
 REFERENCE_ERROR_CHARS = 300
-"""How much of a reference's exception a stand-in passes back to student code."""
+"""How much of an exception's text is quoted when a check cannot read a result, or a reference stand-in fails."""
 
 
 def feedback_message(exc: BaseException) -> str:
@@ -57,7 +57,8 @@ def feedback_message(exc: BaseException) -> str:
         return message.strip() or "a hidden check failed"
     if isinstance(exc, pytest.fail.Exception):
         return str(exc.msg)
-    return f"the result could not be checked ({type(exc).__name__}: {str(exc)[:300]}); check its type and shape"
+    return (f"the result could not be checked ({type(exc).__name__}: {str(exc)[:REFERENCE_ERROR_CHARS]}); "
+            "check its type and shape")
 
 
 class SuitePlugin:

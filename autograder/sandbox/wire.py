@@ -32,6 +32,9 @@ MAX_DEPTH = 64
 on both sides (a student's value nested 10,000 deep must fail cleanly, not crash the grader)."""
 MAX_BLOBS = 10_000
 """Arrays in one message at most."""
+TYPE_NAME_CHARS, QUOTED_CHARS = 100, 80
+"""A type name crossing the wire is cut here (a student may name a class anything), and so is the piece of
+a malformed value an error message quotes."""
 ALLOWED_DTYPE_KINDS = set("biufc")
 
 
@@ -53,7 +56,7 @@ class HandleRef:
     __slots__ = ("id", "type_name", "text")
 
     def __init__(self, id: int, type_name: str = "object", text: str = "") -> None:
-        self.id, self.type_name, self.text = int(id), str(type_name)[:100], str(text)[:200]
+        self.id, self.type_name, self.text = int(id), str(type_name)[:TYPE_NAME_CHARS], str(text)[:200]
 
     def __repr__(self) -> str:
         return f"<{self.type_name} in the sandbox #{self.id}>"
@@ -66,7 +69,7 @@ class LentRef:
     __slots__ = ("id", "type_name", "methods", "attrs")
 
     def __init__(self, id: int, type_name: str, methods: list[str], attrs: dict[str, Any]) -> None:
-        self.id, self.type_name, self.methods, self.attrs = int(id), str(type_name)[:100], list(methods), dict(attrs)
+        self.id, self.type_name, self.methods, self.attrs = int(id), str(type_name)[:TYPE_NAME_CHARS], list(methods), dict(attrs)
 
 
 def _npy_bytes(array: np.ndarray) -> bytes:
@@ -121,7 +124,7 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
         if type(ref) is LentRef:  # only the grader's side lends (a LentRef inside a value is just an object)
             return {"$lent": {"id": ref.id, "type": ref.type_name, "methods": [str(m) for m in ref.methods],
                               "attrs": enc(ref.attrs, d + 1)}}
-        return {"$handle": ref.id, "type": type(v).__name__[:100]}
+        return {"$handle": ref.id, "type": type(v).__name__[:TYPE_NAME_CHARS]}
 
     return enc(value, depth), blobs
 
@@ -152,7 +155,7 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
         if type(t) is list:
             return [dec(x, d + 1) for x in t]
         if type(t) is not dict or len(t) not in (1, 2):
-            raise ProtocolError(f"unexpected value in message: {str(t)[:80]}")
+            raise ProtocolError(f"unexpected value in message: {str(t)[:QUOTED_CHARS]}")
         (tag, body), *rest = t.items()
         if tag == "$tuple" and type(body) is list and not rest:
             return tuple(dec(x, d + 1) for x in body)
@@ -184,7 +187,7 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
         if tag == "$handle" and type(body) is int:
             type_name = rest[0][1] if rest and rest[0][0] == "type" and type(rest[0][1]) is str else "object"
             return from_handle(body, type_name)
-        raise ProtocolError(f"unexpected value in message: {str(t)[:80]}")
+        raise ProtocolError(f"unexpected value in message: {str(t)[:QUOTED_CHARS]}")
 
     return dec(tree, 0)
 
