@@ -86,11 +86,12 @@ def test_dueling_bandit_frequencies_and_count():
 
 def test_dueling_regret():
     P = np.array([[0.5, 0.6, 0.9], [0.4, 0.5, 0.7], [0.1, 0.3, 0.5]])
-    regret = dueling_regret(P, np.array([[0, 0], [1, 2], [0, 2]]))
+    regret = dueling_regret(P, np.array([[0, 0], [1, 2], [0, 2]]), winner=0)
     assert np.allclose(regret, [0.0, (0.6 + 0.9 - 1) / 2, (0.5 + 0.9 - 1) / 2])
-    cycle = np.array([[0.5, 0.7, 0.3], [0.3, 0.5, 0.7], [0.7, 0.3, 0.5]])
     with pytest.raises(ValueError):
-        dueling_regret(cycle, np.array([[0, 1]]))
+        dueling_regret(P, np.array([[0, 1]]), winner=3)
+    # it takes the winner on trust: regret against another arm is not refused (refusing would reveal the winner)
+    assert dueling_regret(P, np.array([[1, 1]]), winner=2)[0] < 0
     pairs = uniform_pairs(DuelingBandit(P, 0), 500, np.random.default_rng(0))
     assert pairs.shape == (500, 2) and (pairs[:, 0] != pairs[:, 1]).all()
 
