@@ -162,6 +162,7 @@ def build_view(view: View, tmp_bytes: int) -> None:
             elif os.path.exists(root + path):
                 empty = _place(root, "/.masked", is_dir=False)
                 _mount(empty, root + path, None, MS_BIND)
+                _mount(None, root + path, None, MS_BIND | MS_REMOUNT | MS_RDONLY | MS_NOSUID | MS_NODEV)
         _tmpfs(_place(root, "/dev", is_dir=True), 65536, "0755", MS_NOSUID | MS_NOEXEC)
         for name, fd in devices:
             _bind_readonly(fd, _place(root, f"/dev/{name}", is_dir=False), devices=True)
