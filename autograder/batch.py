@@ -126,7 +126,7 @@ def _init(assignment: str) -> None:
 
 def _grade_one(entry: Entry, out_dir: str, assignment: str) -> str:
     if _grader is None:
-        result = _grader_error(assignment, entry, _grader_failure or "the grader could not be built")
+        result = _unscored(assignment, entry, _grader_failure or "the grader could not be built", GRADER_ERROR)
     else:
         result = _grader.grade(entry.notebook, name=entry.name)
     if entry.note:
@@ -149,12 +149,9 @@ def _done(out_dir: Path, name: str) -> bool:
     return result is not None and result.status != GRADER_ERROR
 
 
-def _ungradable(assignment: str, entry: Entry, reason: str) -> GradeResult:
-    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=UNGRADABLE)
-
-
-def _grader_error(assignment: str, entry: Entry, reason: str) -> GradeResult:
-    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=GRADER_ERROR)
+def _unscored(assignment: str, entry: Entry, reason: str, status: str) -> GradeResult:
+    """A result with no tests run: ``ungradable`` (the submission's fault) or ``grader_error`` (ours)."""
+    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=status)
 
 
 def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True) -> list[GradeResult]:
@@ -166,7 +163,7 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):
-            write_outputs(_ungradable(assignment, e, e.problem), out_dir / e.name)
+            write_outputs(_unscored(assignment, e, e.problem, UNGRADABLE), out_dir / e.name)
     attempts = 0
     while todo and attempts < 3:
         attempts += 1
@@ -183,13 +180,13 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
                     except BrokenProcessPool:
                         raise
                     except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission, nor grade it
-                        write_outputs(_grader_error(assignment, entry, f"internal grader error: {err}"),
+                        write_outputs(_unscored(assignment, entry, f"internal grader error: {err}", GRADER_ERROR),
                                       out_dir / entry.name)
         except BrokenProcessPool:
             pass  # a grading process died; the finished results are on disk, retry the rest
         todo = [e for e in todo if _load(out_dir, e.name) is None]
     for e in todo:
-        write_outputs(_grader_error(assignment, e, "the grading process died repeatedly on this submission"),
+        write_outputs(_unscored(assignment, e, "the grading process died repeatedly on this submission", GRADER_ERROR),
                       out_dir / e.name)
     results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
     write_gradebook(results, out_dir / GRADEBOOK_NAME, expected)

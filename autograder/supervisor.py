@@ -22,7 +22,7 @@ from dataclasses import asdict
 from typing import Any
 
 from autograder.sandbox.config import SpawnConfig
-from autograder.sandbox.isolation import PR_SET_DUMPABLE, _libc
+from autograder.sandbox.isolation import PR_SET_DUMPABLE, libc
 from autograder.sandbox.wire import FrameReader, send_message
 
 OUTPUT_KEEP = 4096
@@ -42,7 +42,7 @@ class Zygote:
         child.close()
         self.sock = parent
         self.lock = threading.Lock()
-        _libc.prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)  # workers may not read the grader's memory
+        libc.prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)  # workers may not read the grader's memory
 
     def spawn(self, config: SpawnConfig) -> "WorkerProcess":
         to_r, to_w = os.pipe()

@@ -7,7 +7,7 @@ import pytest
 
 from autograder import course
 from autograder.batch import run_batch
-from conftest import FIXTURE_COURSE
+from conftest import FIXTURE_COURSE, with_cells
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
@@ -36,3 +36,26 @@ def test_the_worked_example_of_contributing_scores_as_expected(open_tmp, monkeyp
     monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
     monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
     _check("ex", open_tmp)
+
+
+MUTANTS = {  # CONTRIBUTING.md's table: each mutant of the worked example and its (softmax, cross_entropy) score
+    "no_max": ({"softmax": "def softmax(logits):\n    e = np.exp(logits)\n    return e / e.sum(axis=-1, keepdims=True)"},
+               (2, 3)),
+    "wrong_axis": ({"softmax": "def softmax(logits):\n    z = logits - logits.max(axis=-1, keepdims=True)\n"
+                               "    e = np.exp(z)\n    return e / e.sum(axis=0, keepdims=True)"}, (0, 3)),
+    "sum": ({"cross_entropy": "def cross_entropy(logits, labels):\n    p = softmax(logits)\n"
+                              "    return float(-np.sum(np.log(p[np.arange(len(labels)), labels])))"}, (3, 0)),
+    "sign": ({"cross_entropy": "def cross_entropy(logits, labels):\n    p = softmax(logits)\n"
+                               "    return float(np.mean(np.log(p[np.arange(len(labels)), labels])))"}, (3, 0)),
+}
+
+
+def test_the_worked_examples_mutants_lose_points_where_contributing_says(open_tmp, monkeypatch):
+    monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
+    monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))
+    folder = open_tmp / "mutants"
+    for name, (cells, _) in MUTANTS.items():
+        with_cells(FIXTURE_COURSE / "autograder/samples/ex/complete.ipynb", folder / f"{name}.ipynb", cells)
+    results = {r.submission: r for r in run_batch("ex", folder, open_tmp / "out", jobs=2, progress=False)}
+    got = {name: tuple(s.score for s in results[name].stubs) for name in MUTANTS}
+    assert got == {name: want for name, (_, want) in MUTANTS.items()}

@@ -41,7 +41,7 @@ OPEN_FILES_CEILING = 1 << 16
 SKELETON_BYTES = 1024 * 1024
 """Size of the view's own root: it only holds the empty folders that mounts sit on."""
 
-_libc = ctypes.CDLL(None, use_errno=True)
+libc = ctypes.CDLL(None, use_errno=True)
 
 
 class IsolationError(OSError):
@@ -58,7 +58,7 @@ def _mount(source: str | None, target: str, fstype: str | None, flags: int, data
     def enc(s: str | None) -> bytes | None:
         return None if s is None else s.encode()
 
-    _check(_libc.mount(enc(source), enc(target), enc(fstype), ctypes.c_ulong(flags), enc(data)), f"mount {target}")
+    _check(libc.mount(enc(source), enc(target), enc(fstype), ctypes.c_ulong(flags), enc(data)), f"mount {target}")
 
 
 # ------------------------------------------------------------------ launcher: namespaces
@@ -73,10 +73,10 @@ def enter_namespaces() -> str:
     flags = CLONE_NEWNS | CLONE_NEWNET | CLONE_NEWPID | CLONE_NEWIPC | CLONE_NEWUTS
     try:
         if os.geteuid() == 0:
-            _check(_libc.unshare(flags), "unshare")
+            _check(libc.unshare(flags), "unshare")
             return "full"
         uid, gid = os.geteuid(), os.getegid()
-        _check(_libc.unshare(flags | CLONE_NEWUSER), "unshare")
+        _check(libc.unshare(flags | CLONE_NEWUSER), "unshare")
         with open("/proc/self/setgroups", "w") as f:
             f.write("deny")
         with open("/proc/self/uid_map", "w") as f:
@@ -123,9 +123,9 @@ def _pivot(root: str) -> None:
     """Make ``root`` the file system's root and drop every mount of the old one."""
     os.chdir(root)
     os.mkdir(".old")
-    if SYS_PIVOT_ROOT is not None and _libc.syscall(SYS_PIVOT_ROOT, b".", b".old") == 0:
+    if SYS_PIVOT_ROOT is not None and libc.syscall(SYS_PIVOT_ROOT, b".", b".old") == 0:
         os.chroot(".")
-        _check(_libc.umount2(b"/.old", MNT_DETACH), "umount the old root")
+        _check(libc.umount2(b"/.old", MNT_DETACH), "umount the old root")
         os.rmdir("/.old")
     else:  # pivot_root refused (the old root is not a mount point in some containers): move and chroot
         os.rmdir(".old")
@@ -222,12 +222,12 @@ def _last_capability() -> int:
 def _drop_capabilities() -> None:
     """Empty every capability set (bounding, ambient, effective, permitted, inheritable), for good."""
     for cap in range(_last_capability() + 1):
-        _libc.prctl(PR_CAPBSET_DROP, cap, 0, 0, 0)  # fails only for numbers this kernel does not know
-    _libc.prctl(PR_CAP_AMBIENT, PR_CAP_AMBIENT_CLEAR_ALL, 0, 0, 0)
+        libc.prctl(PR_CAPBSET_DROP, cap, 0, 0, 0)  # fails only for numbers this kernel does not know
+    libc.prctl(PR_CAP_AMBIENT, PR_CAP_AMBIENT_CLEAR_ALL, 0, 0, 0)
     header = (ctypes.c_uint32 * 2)(LINUX_CAPABILITY_VERSION_3, 0)
     data = (ctypes.c_uint32 * 6)()
-    _check(_libc.capset(header, data), "capset")
-    _check(_libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0), "no_new_privs")
+    _check(libc.capset(header, data), "capset")
+    _check(libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0), "no_new_privs")
 
 
 def drop_privileges(uid: int | None, read_as: tuple[int, int]) -> None:
@@ -241,14 +241,14 @@ def drop_privileges(uid: int | None, read_as: tuple[int, int]) -> None:
     ``setuid`` or ``chown`` is possible any more, and programs the worker starts gain nothing.
     """
     if uid is not None:
-        _check(_libc.prctl(PR_SET_SECUREBITS, SECBIT_NOROOT | SECBIT_NO_SETUID_FIXUP | SECBIT_NO_CAP_AMBIENT_RAISE
+        _check(libc.prctl(PR_SET_SECUREBITS, SECBIT_NOROOT | SECBIT_NO_SETUID_FIXUP | SECBIT_NO_CAP_AMBIENT_RAISE
                            | SECBITS_LOCKED, 0, 0, 0), "securebits")
         os.setgroups([])
         os.setresgid(uid, uid, uid)
         os.setresuid(uid, uid, uid)
-        _libc.setfsgid(ctypes.c_uint(read_as[1]))
-        _libc.setfsuid(ctypes.c_uint(read_as[0]))
-        if _libc.setfsuid(ctypes.c_uint(0xFFFFFFFF)) != read_as[0]:  # an invalid id reads the current one
+        libc.setfsgid(ctypes.c_uint(read_as[1]))
+        libc.setfsuid(ctypes.c_uint(read_as[0]))
+        if libc.setfsuid(ctypes.c_uint(0xFFFFFFFF)) != read_as[0]:  # an invalid id reads the current one
             raise IsolationError(0, "could not set the file-system identity")
     _drop_capabilities()
     if not _capabilities_empty():

@@ -104,7 +104,7 @@ def _launch(config: SpawnConfig, fds: list[int]) -> None:
 def main(sock: socket.socket, preload: list[str]) -> None:
     """[zygote] Pre-import ``preload``, then fork a launcher per request on ``sock``; never returns."""
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # children are reaped automatically
-    isolation._libc.prctl(isolation.PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # die with the grader
+    isolation.libc.prctl(isolation.PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # die with the grader
     os.environ.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg")
     for module in [*preload, *(m for p in preload for m in IMPORT_TIME_PROBES.get(p.split(".")[0], ()))]:
         try:
