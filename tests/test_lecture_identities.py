@@ -1,11 +1,17 @@
 """Numerical checks of the identities derived in the lecture notes.
 
-Each test implements a formula as the lecture states it (in `lecture_math.py`)
-and compares it with an independent computation on small random instances:
-exhaustive enumeration, a generic optimiser, Monte Carlo, or finite
-differences.  None compares with a copied expected number.  If a lecture
-formula were wrong (a sign, a missing factor, a wrong normaliser), the
-matching test would fail.
+Each test names the labelled equations it checks with ``@checks(label,
+digest)`` (``tests/lecture_links.py``). The digest is a hash of the equation's
+TeX source as it stands in ``lectures/``: when someone edits an equation, every
+test tied to it fails before running, naming the file and line, until the test
+has been re-read against the new text (and fixed, or the equation fixed) and
+the digest updated; ``tests/test_lecture_links.py`` fails while any labelled
+equation in any chapter has no test. Print an equation's digest with
+``python tests/lecture_links.py eq-name``. Each test compares the formula, as
+the lecture states it (often in ``lecture_math.py``), with an independent
+computation on small random instances: exhaustive enumeration, a generic
+optimiser, Monte Carlo, finite differences, or a case worked by hand. None
+compares with a copied expected number.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from scipy.special import expit, log_expit, logsumexp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import lecture_math as lm  # noqa: E402
+from lecture_links import checks  # noqa: E402
 
 
 def random_mdp(rng: np.random.Generator, n_states: int, n_actions: int, n_features: int):
@@ -69,6 +76,9 @@ def central_difference(fun, x: np.ndarray, h: float = 1e-5) -> np.ndarray:
 # ---------------------------------------------------------------------------
 
 
+@checks("eq-maxent-problem", "02a6c56e")
+@checks("eq-maxent-solution", "4526ce08")
+@checks("eq-maxent-dual", "a4ce3354")
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_maxent_primal_equals_exponential_family(seed):
     rng = np.random.default_rng(seed)
@@ -109,6 +119,7 @@ def test_maxent_primal_equals_exponential_family(seed):
     assert entropy == pytest.approx(lm.maxent_dual(dual.x, F, mu_hat), abs=1e-8)
 
 
+@checks("eq-maxent-solution", "4526ce08")
 def test_maxent_solution_beats_every_feasible_perturbation():
     """H(q) = H(p_w) - KL(q || p_w) for every feasible q (the Gibbs proof)."""
     rng = np.random.default_rng(3)
@@ -136,6 +147,10 @@ def test_maxent_solution_beats_every_feasible_perturbation():
 # ---------------------------------------------------------------------------
 
 
+@checks("eq-marginal-recursion", "5c2ca5e7")
+@checks("eq-occ-finite", "e11089a6")
+@checks("eq-flow-finite", "914b97d7")
+@checks("eq-occupancy-identity", "8dc26784")
 @pytest.mark.parametrize("gamma", [1.0, 0.8])
 def test_occupancy_identity_finite_horizon_by_enumeration(gamma):
     rng = np.random.default_rng(4)
@@ -164,6 +179,10 @@ def test_occupancy_identity_finite_horizon_by_enumeration(gamma):
     assert rho.sum() == pytest.approx(np.sum(gamma ** np.arange(horizon)))
 
 
+@checks("eq-occ-discounted", "af332a3b")
+@checks("eq-flow-state", "82867720")
+@checks("eq-flow-sa", "53c8964f")
+@checks("eq-occupancy-identity", "8dc26784")
 def test_occupancy_identity_discounted():
     rng = np.random.default_rng(5)
     n_states, n_actions, gamma = 5, 3, 0.9
@@ -216,6 +235,9 @@ def deterministic_mdp(rng, n_states, n_actions):
     return P
 
 
+@checks("eq-soft-q", "5603f823")
+@checks("eq-soft-v", "319357d0")
+@checks("eq-soft-policy", "0549568e")
 def test_soft_policy_reproduces_trajectory_distribution_deterministic():
     """With deterministic dynamics, prod_t pi_t(a_t|s_t) = exp(R(tau)) / Z(s_0)."""
     rng = np.random.default_rng(6)
@@ -231,6 +253,10 @@ def test_soft_policy_reproduces_trajectory_distribution_deterministic():
     assert V[0, 1] == pytest.approx(logsumexp(returns))  # V_0(s_0) = log Z(s_0)
 
 
+@checks("eq-irl-loglik", "37404f5e")
+@checks("eq-irl-gradient", "6a71fb1a")
+@checks("eq-irl-gradient-visits", "671c734b")
+@checks("eq-svf", "c60b4fe5")
 def test_irl_gradient_deterministic_matches_finite_difference():
     rng = np.random.default_rng(7)
     n_states, n_actions, horizon, n_features = 5, 3, 5, 3
@@ -260,6 +286,7 @@ def test_irl_gradient_deterministic_matches_finite_difference():
     np.testing.assert_allclose(grad, central_difference(mean_log_likelihood, w), atol=1e-7)
 
 
+@checks("eq-mce-objective", "c18dc17b")
 def test_causal_irl_gradient_matches_finite_difference_stochastic():
     rng = np.random.default_rng(8)
     n_states, n_actions, horizon, n_features = 4, 3, 4, 3
@@ -274,6 +301,7 @@ def test_causal_irl_gradient_matches_finite_difference_stochastic():
     np.testing.assert_allclose(grad, central_difference(objective, w), atol=1e-7)
 
 
+@checks("eq-mce-objective", "c18dc17b")
 def test_causal_objective_is_expected_causal_log_likelihood():
     """E_{tau ~ pi_D}[sum_t log pi^w_t(a_t|s_t)] = w.mu_D - E_{p0} V_0 (exact enumeration)."""
     rng = np.random.default_rng(9)
@@ -292,6 +320,7 @@ def test_causal_objective_is_expected_causal_log_likelihood():
     )
 
 
+@checks("eq-maxent-2008", "d6c67072")
 def test_risky_lottery_example():
     """Chapter 3's example: trajectory-level form is optimistic, causal form is not."""
     stake = 4.0
@@ -320,6 +349,8 @@ def test_risky_lottery_example():
 # ---------------------------------------------------------------------------
 
 
+@checks("eq-kl-objective", "d1aabb94")
+@checks("eq-kl-optimum", "f52a9f5f")
 @pytest.mark.parametrize("beta", [0.3, 1.0, 4.0])
 def test_kl_regularised_optimum_matches_generic_optimiser(beta):
     rng = np.random.default_rng(10)
@@ -359,6 +390,8 @@ def preference_data(rng, n_prompts, n_responses, n_pairs):
     return prompts, chosen, rejected
 
 
+@checks("eq-dpo-loss", "655897a3")
+@checks("eq-dpo-grad", "e9c312e0")
 def test_dpo_gradient_matches_finite_difference():
     rng = np.random.default_rng(11)
     n_prompts, n_responses, beta = 3, 5, 0.5
@@ -380,6 +413,9 @@ def test_dpo_gradient_matches_finite_difference():
     np.testing.assert_allclose(grad, central_difference(loss, theta), atol=1e-8)
 
 
+@checks("eq-reward-reparam", "54dc0367")
+@checks("eq-bt-policy", "30b3eba1")
+@checks("eq-dpo-loss", "655897a3")
 def test_dpo_objective_is_bradley_terry_likelihood_of_implied_reward():
     rng = np.random.default_rng(12)
     n_prompts, n_responses, beta = 4, 6, 0.7
@@ -424,6 +460,8 @@ def test_dpo_objective_is_bradley_terry_likelihood_of_implied_reward():
 # ---------------------------------------------------------------------------
 
 
+@checks("eq-plackett-luce", "94f4c78d")
+@checks("eq-bt", "e1e5b35c")
 def test_plackett_luce_two_items_is_bradley_terry():
     rng = np.random.default_rng(13)
     for _ in range(20):
@@ -433,6 +471,7 @@ def test_plackett_luce_two_items_is_bradley_terry():
         )
 
 
+@checks("eq-plackett-luce", "94f4c78d")
 def test_plackett_luce_is_a_distribution_and_matches_gumbel_sampling():
     rng = np.random.default_rng(14)
     u = rng.normal(size=4)
@@ -449,6 +488,9 @@ def test_plackett_luce_is_a_distribution_and_matches_gumbel_sampling():
     assert np.all(np.abs(freq - probs) < 5 * se + 1e-4)
 
 
+@checks("eq-bt-loglik", "8928ba20")
+@checks("eq-bt-grad", "2f0dab09")
+@checks("eq-mm-update", "99523cd7")
 def test_bt_gradient_and_mm_reach_the_logistic_mle():
     rng = np.random.default_rng(15)
     k = 5
@@ -494,6 +536,8 @@ def test_bt_gradient_and_mm_reach_the_logistic_mle():
     np.testing.assert_allclose(u_mm - u_mm.mean(), mle, atol=1e-6)
 
 
+@checks("eq-rao-kupper", "48db9141")
+@checks("eq-davidson", "a7ba7990")
 def test_tie_models_are_distributions_and_reduce_to_bt():
     rng = np.random.default_rng(16)
     for _ in range(20):
@@ -506,6 +550,7 @@ def test_tie_models_are_distributions_and_reduce_to_bt():
         assert lm.davidson_probs(ui, uj, 0.0)[0] == pytest.approx(bt)
 
 
+@checks("eq-bt", "e1e5b35c")
 def test_bt_strong_stochastic_transitivity():
     rng = np.random.default_rng(17)
     for _ in range(200):
@@ -516,6 +561,8 @@ def test_bt_strong_stochastic_transitivity():
                 assert p[i, k] >= max(p[i, j], p[j, k]) - 1e-15
 
 
+@checks("eq-copeland", "2c93e163")
+@checks("eq-borda", "c82237ff")
 def test_winner_definitions_on_the_lecture_example():
     """The 4-arm matrix of chapter 5: Condorcet = Copeland = A, Borda = B."""
     p = np.array(
@@ -543,6 +590,7 @@ def test_winner_definitions_on_the_lecture_example():
 # ---------------------------------------------------------------------------
 
 
+@checks("eq-bon-discrete", "0b8941bd")
 def test_best_of_n_distribution_by_enumeration():
     rng = np.random.default_rng(19)
     q = rng.dirichlet(np.ones(5))  # atoms already sorted by increasing reward
@@ -553,6 +601,7 @@ def test_best_of_n_distribution_by_enumeration():
     np.testing.assert_allclose(lm.best_of_n_probs(q, n), exact, atol=1e-14)
 
 
+@checks("eq-bon-kl", "c88ef030")
 @pytest.mark.parametrize("n", [2, 4, 16, 64])
 def test_best_of_n_kl_formula_in_the_fine_grid_limit(n):
     fine = np.full(200_000, 1.0 / 200_000)
@@ -583,6 +632,8 @@ def simulate_drift(eps, horizon, recoverable, n_runs, rng):
     return cost.mean(), cost.std() / np.sqrt(n_runs)
 
 
+@checks("eq-drift-bc", "ba888058")
+@checks("eq-drift-dagger", "17c3df78")
 def test_drift_model_quadratic_versus_linear():
     rng = np.random.default_rng(20)
     eps = 0.002
@@ -604,6 +655,9 @@ def test_drift_model_quadratic_versus_linear():
         assert cost >= 0.4 * horizon**2 * eps  # and it is attained up to a constant
 
 
+@checks("eq-total-cost", "1980a3bf")
+@checks("eq-bc-bound", "b9b5aae9")
+@checks("eq-dagger-bound", "989f6591")
 def test_bc_and_dagger_bounds_on_random_mdps():
     """J(learner) - J(expert) <= T^2 eps_expert-dist and <= u T eps_learner-dist."""
     rng = np.random.default_rng(21)
@@ -639,6 +693,7 @@ def test_bc_and_dagger_bounds_on_random_mdps():
 # ---------------------------------------------------------------------------
 # the per-step constant that segment comparisons cannot identify (lecture 6)
 # ---------------------------------------------------------------------------
+@checks("eq-segment-bt", "4927e9ff")
 def test_segment_comparisons_ignore_a_per_step_constant_that_early_termination_does_not():
     """Equal-length segments: P(a > b) is unchanged by r -> r + c. An MDP whose "fall" action ends the
     episode: the optimal first action flips from staying up to falling as c goes from +1 to -1."""

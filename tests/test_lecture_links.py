@@ -1,0 +1,150 @@
+"""Every labelled equation in lectures/ has a test, and every test's digest matches the equation.
+
+How the link works is explained in ``tests/lecture_links.py`` and in
+CONTRIBUTING.md ("Lecture equations and their tests"). This module checks the
+link itself: the parser, and the coverage of every chapter, new ones included.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import lecture_links as ll  # noqa: E402
+
+# Labels that no test checks yet, each to be removed from this set by the commit that adds its test.
+# The coverage test fails for a label missing from here and for a label here that is already covered.
+PENDING: set[str] = {
+    "eq-bc-objective", "eq-performance-difference", "eq-linear-return", "eq-empirical-features", "eq-shaping",
+    "eq-ng-russell", "eq-maxent-lagrangian", "eq-mce-problem", "eq-reward-rational", "eq-rm-loss",
+    "eq-dueling-regret", "eq-segment-loss", "eq-ppo-clip", "eq-rlhf-objective", "eq-gao-forms",
+}
+
+
+def _current_and_covered():
+    current = ll.equations()
+    ll.load_test_modules()
+    return current, ll.coverage(current)
+
+
+def test_every_labelled_equation_has_a_test():
+    current, covered = _current_and_covered()
+    missing = [f"{label} ({current[label].where}, digest {current[label].digest})"
+               for label, cites in covered.items() if label in current and not cites and label not in PENDING]
+    assert not missing, ("labelled equations no test checks (add @checks(label, digest) to the test that "
+                         "checks each; python tests/lecture_links.py --missing lists them):\n  " + "\n  ".join(missing))
+
+
+def test_pending_labels_exist_and_are_not_yet_covered():
+    current, covered = _current_and_covered()
+    gone = sorted(PENDING - set(current))
+    done = sorted(label for label in PENDING & set(current) if covered[label])
+    assert not gone, f"PENDING names labels no lecture has: {gone}"
+    assert not done, f"PENDING names labels that now have a test (remove them): {done}"
+
+
+def test_every_citation_is_current():
+    current, _ = _current_and_covered()
+    stale = [message for c in ll.REGISTRY.values() if (message := ll.stale_message(c, current))]
+    assert not stale, "\n".join(stale)
+
+
+# ---------------------------------------------------------------------------
+# the parser and the decorator on synthetic pages
+# ---------------------------------------------------------------------------
+
+PAGE = """\
+# A chapter
+
+$$
+a = b + c
+$$ (eq-one)
+
+```{prf:theorem} Inside a directive
+:label: thm-x
+
+$$
+x^2 \\ge 0
+$$ (eq-two)
+```
+
+```python
+$$
+not = math
+$$ (eq-in-code)
+```
+
+````{exercise} Nested
+```{math}
+:label: eq-three
+y =  z
+```
+````
+
+$$ q = r $$ (eq-four)
+
+$$
+unlabelled
+$$
+
+  $$
+  indented
+  $$ (eq-five)
+"""
+
+
+def test_parser_reads_both_syntaxes_inside_directives_and_skips_code():
+    found = {eq.label: eq for eq in ll.parse_equations(PAGE, Path("page.md"))}
+    assert list(found) == ["eq-one", "eq-two", "eq-three", "eq-four", "eq-five"]
+    assert found["eq-one"].source == "a = b + c" and found["eq-one"].line == 3
+    assert found["eq-two"].source == "x^2 \\ge 0"
+    assert found["eq-three"].source == "y =  z"
+    assert found["eq-four"].source == "q = r"
+    assert found["eq-five"].source == "indented"
+
+
+def test_digest_ignores_layout_but_not_content():
+    assert ll.digest("a = b\n  + c") == ll.digest("a = b + c")
+    assert ll.digest("a = b + c") != ll.digest("a = b - c")
+    assert ll.digest("T^2 \\epsilon") != ll.digest("T \\epsilon")
+
+
+def test_unterminated_display_and_duplicate_labels_are_errors(tmp_path):
+    with pytest.raises(ll.LectureParseError, match="never closed"):
+        ll.parse_equations("$$\na = b\n", Path("bad.md"))
+    (tmp_path / "a.md").write_text("$$\nx\n$$ (eq-same)\n")
+    (tmp_path / "b.md").write_text("$$\ny\n$$ (eq-same)\n")
+    with pytest.raises(ll.LectureParseError, match="used twice"):
+        ll.equations(tmp_path)
+
+
+def test_a_test_fails_when_its_equation_changes(tmp_path, monkeypatch):
+    page = tmp_path / "ch.md"
+    page.write_text("$$\nJ \\le T^2 \\epsilon\n$$ (eq-demo)\n")
+    monkeypatch.setattr(ll, "LECTURES", tmp_path)
+    ran = []
+
+    @ll.checks("eq-demo", ll.digest("J \\le T^2 \\epsilon"))
+    def demo_test():
+        ran.append(True)
+
+    try:
+        demo_test()
+        assert ran == [True]
+        page.write_text("$$\nJ \\le T \\epsilon\n$$ (eq-demo)\n")  # someone drops a T
+        with pytest.raises(AssertionError, match="eq-demo .* changed since"):
+            demo_test()
+        page.write_text("$$\nJ \\le T^2 \\epsilon\n$$ (eq-renamed)\n")
+        with pytest.raises(AssertionError, match="no lecture labels"):
+            demo_test()
+        assert ran == [True]  # the body never ran against a changed equation
+    finally:
+        ll.REGISTRY.pop(("eq-demo", f"{__name__}.demo_test"), None)
+
+
+def test_bad_digest_is_refused():
+    with pytest.raises(ValueError, match="8 lowercase hex"):
+        ll.checks("eq-x", "not-hex")
