@@ -32,13 +32,13 @@ def _initial_learner(policy_seed):
     return GaussianPolicy(4, 1, hidden=(16,)).eval()
 
 
-def _run(in_sandbox, betas, episodes=2, seed=0, policy_seed=0, learner=LEARNER, **train):
+def _run(in_sandbox, betas, episodes=2, seed=0, policy_seed=0, learner=LEARNER, timeout=None, **train):
     """The student's (policy, history) for a DAgger run on the race track."""
     demo = _demo()
     train = {"n_epochs": 3, "batch_size": 64, "lr": 3e-3, **train}
     expr = (f"dagger(racetrack.ENV_ID, racetrack.Expert(), {learner}, len(betas), betas, obs, actions, "
             "episodes_per_iter=episodes, seed=seed, **train)")
-    result = in_sandbox(expr, betas=list(betas), obs=demo.obs, actions=demo.actions, episodes=episodes,
+    result = in_sandbox(expr, timeout=timeout, betas=list(betas), obs=demo.obs, actions=demo.actions, episodes=episodes,
                             seed=seed, policy_seed=policy_seed, train=train)
     assert isinstance(result, tuple) and len(result) == 2, "dagger should return (policy, history)"
     policy, hist = result
@@ -68,9 +68,11 @@ def test_beta_zero_rolls_out_the_learner_and_adds_its_real_steps(student, in_san
     check_scalar(hist["returns"][0], float(own.returns.mean()), rtol=1e-4,
                  name="the first iteration's mean return (the untrained learner's own episodes)")
     n_new = int(own.lengths.sum())
-    assert int(hist["dataset_sizes"][0]) == len(demo.obs) + n_new, (
-        f"after one iteration the data set should hold the {len(demo.obs)} demonstration pairs plus the {n_new} real "
-        f"steps of the rollouts, got {int(hist['dataset_sizes'][0])} (padding after an episode ends is not a step)")
+    got_size = int(hist["dataset_sizes"][0])
+    assert got_size == len(demo.obs) + n_new, (
+        f"after one iteration the data set should hold the {len(demo.obs)} demonstration pairs plus the real steps of "
+        f"the rollouts; it holds {'more' if got_size > len(demo.obs) + n_new else 'fewer'} pairs than that "
+        "(padding after an episode ends is not a step; every real step counts once)")
     check_array(_rows(hist["obs"][len(demo.obs):]), _rows(own.obs[own.mask]), rtol=1e-5, atol=1e-6,
                 name="the states added in the first iteration (the learner's visited states)")
 
@@ -117,8 +119,10 @@ def test_learns_to_drive(student, in_sandbox, trusted_copy):
     # Pretrain with whatever `train_bc` the notebook's namespace holds (the reference's, while swapped in).
     bc = ("(lambda p: (mean_return.__globals__['train_bc'](p, obs, actions, n_epochs=100, batch_size=64, lr=3e-3, "
           "seed=0), p)[1])((torch.manual_seed(policy_seed), GaussianPolicy(4, 1, hidden=(64, 64)))[1])")
-    policy, hist = _run(in_sandbox, [0.0] * 6, episodes=4, seed=0, policy_seed=0, learner=bc, n_epochs=50)
+    policy, hist = _run(in_sandbox, [0.0] * 6, episodes=4, seed=0, policy_seed=0, learner=bc, n_epochs=50,
+                        timeout=120)
     expert = rollout(EXPERT.act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
     got = rollout(trusted_copy(policy).act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
-    assert got >= 0.8 * expert, (f"after six iterations the learner's return on the grader's episodes is {got:.0f}, "
-                                 f"the expert's {expert:.0f} (the reference reaches the expert's level)")
+    assert got >= 0.8 * expert, (f"after six iterations the learner earns about {round(100 * got / expert, -1):.0f}% of the "
+                                 "expert's return on the grader's episodes; the reference reaches the expert's level "
+                                 "(at least 80% is needed)")

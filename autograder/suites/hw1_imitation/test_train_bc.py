@@ -1,7 +1,9 @@
 """Hidden tests of hw1's `train_bc` (run with the reference `bc_loss`, so only the training loop is judged)."""
 import numpy as np
+import torch
 
 from autograder.suite import check_array, stub
+from rlcourse.nets import GaussianPolicy
 
 HINT = ("Split off round(val_fraction * N) pairs with np.random.default_rng(seed); each epoch shuffle the rest, "
         "loop over minibatches (zero_grad, bc_loss, backward, step); record the epoch's mean training loss and the "
@@ -19,6 +21,21 @@ def _linear_expert(rng, n):
 def _train(student, obs, actions, hidden=(), policy_seed=0, **kwargs):
     """(policy handle, history) of the student's train_bc on a freshly built, seeded policy."""
     return student.helpers.train_fresh_policy(obs, actions, hidden=tuple(hidden), policy_seed=policy_seed, **kwargs)
+
+
+def _initial_policy(obs_dim, act_dim, hidden=(), policy_seed=0):
+    """The grader's copy of the policy ``sandbox_helpers.make_policy`` builds before training."""
+    with torch.random.fork_rng():
+        torch.manual_seed(policy_seed)
+        return GaussianPolicy(obs_dim, act_dim, hidden=tuple(hidden)).eval()
+
+
+def _mean_nll(policy, obs, actions):
+    """The Gaussian negative log-likelihood averaged over all pairs, computed on the grader's side."""
+    with torch.no_grad():
+        obs, actions = torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(actions, dtype=torch.float32)
+        z = (actions - policy(obs)) * torch.exp(-policy.log_std)
+        return float((0.5 * z**2 + policy.log_std + 0.5 * np.log(2 * np.pi)).sum(-1).mean())
 
 
 def _history(hist, n_epochs):
@@ -67,8 +84,8 @@ def test_is_reproducible_under_a_seed(student, trusted_copy, rng):
 
 
 @stub("train_bc", points=1, hint="Convert numpy inputs of any float dtype to float32 tensors; a last minibatch may be smaller; never modify the inputs.")
-def test_small_float64_data_and_inputs_untouched(student, rng):
-    """Ten float64 pairs with a batch size of 256 train without error and leave the arrays unchanged"""
+def test_small_float64_data_and_inputs_untouched(student, trusted_copy, rng):
+    """Ten float64 pairs with a batch size of 256 train (the one short minibatch is used) and leave the arrays unchanged"""
     obs, actions = rng.normal(size=(10, 3)), rng.normal(size=(10, 2))
     keep = obs.copy(), actions.copy()
     hist, obs_after, actions_after = student.helpers.inputs_after_training(
@@ -76,6 +93,35 @@ def test_small_float64_data_and_inputs_untouched(student, rng):
     _history(hist, 2)
     check_array(obs_after, keep[0], rtol=0, atol=0, name="the observations after training")
     check_array(actions_after, keep[1], rtol=0, atol=0, name="the actions after training")
+    policy, _ = _train(student, obs, actions, hidden=(4,), n_epochs=2, batch_size=256, lr=1e-2, val_fraction=0.2, seed=0)
+    before = _initial_policy(3, 2, (4,)).mean.bias.detach().numpy()
+    after = trusted_copy(policy).mean.bias.detach().numpy()
+    assert not np.array_equal(before, after), (
+        "with 8 training pairs and batch_size = 256 the policy never changed: the last (here the only) minibatch "
+        "may be smaller than batch_size and must still be trained on")
+
+
+@stub("train_bc", points=1, hint="history['train'][e] is the mean of the per-pair training losses over epoch e's "
+                                 "minibatches: sum loss * len(batch) over the epoch, divide by the number of training pairs.")
+def test_reported_training_loss_is_the_epoch_mean(student, rng):
+    """With lr = 0 the policy never moves, so the reported training and held-out losses must make up the loss of all pairs"""
+    for n, batch_size in ((50, 10), (10, 256)):
+        _, _, _, obs, actions = _linear_expert(rng, n)
+        _, hist = _train(student, obs, actions, hidden=(8,), n_epochs=2, batch_size=batch_size, lr=0.0, seed=3,
+                         val_fraction=0.2)
+        train, val = _history(hist, 2)
+        n_val = round(0.2 * n)
+        whole = _mean_nll(_initial_policy(3, 2, (8,)), obs, actions)
+        implied = (n * whole - n_val * val) / (n - n_val)   # the training-pairs' mean loss the held-out loss implies
+        where = f"{n} pairs, batch_size {batch_size}"
+        assert np.isfinite(val).all(), f"the held-out losses should be finite numbers ({where})"
+        for e in range(2):
+            if not np.isclose(train[e], implied[e], rtol=1e-4, atol=1e-4):
+                direction = "too large" if train[e] > implied[e] else "too small"
+                assert False, (f"history['train'][{e}] is {direction} ({where}, lr = 0 so the policy never changes): "
+                               "it should be the mean loss per training pair over the epoch's minibatches (each batch's "
+                               "mean loss weighted by its size, divided by the number of training pairs); a sum, a "
+                               "total that does not start at 0, or a skipped short minibatch all break it")
 
 
 @stub("train_bc", points=1, hint="With val_fraction = 0 nothing is held out: record float('nan') as the validation loss and train on everything.")
