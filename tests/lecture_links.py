@@ -283,7 +283,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     current = equations()
     load_test_modules()
-    covered = coverage(current)
+    registry = importlib.import_module("lecture_links")  # the tests register there, not in __main__
+    covered = registry.coverage(current)
     problems = 0
     for label in args.labels or list(current):
         eq = current.get(label)
@@ -298,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{label:28s} {eq.digest}  {eq.where:40s} {', '.join(cited) or 'NO TEST'}")
         if args.labels:
             print("    " + eq.source.replace("\n", "\n    "))
-    for citation in REGISTRY.values():
+    for citation in registry.REGISTRY.values():
         message = stale_message(citation, current)
         if message:
             print("stale: " + message)

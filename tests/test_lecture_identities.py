@@ -655,41 +655,6 @@ def test_drift_model_quadratic_versus_linear():
         assert cost >= 0.4 * horizon**2 * eps  # and it is attained up to a constant
 
 
-@checks("eq-total-cost", "1980a3bf")
-@checks("eq-bc-bound", "b9b5aae9")
-@checks("eq-dagger-bound", "989f6591")
-def test_bc_and_dagger_bounds_on_random_mdps():
-    """J(learner) - J(expert) <= T^2 eps_expert-dist and <= u T eps_learner-dist."""
-    rng = np.random.default_rng(21)
-    n_states, n_actions, horizon = 4, 3, 6
-    for _ in range(30):
-        P = rng.dirichlet(np.ones(n_states), size=(n_states, n_actions))
-        p0 = rng.dirichlet(np.ones(n_states))
-        cost = rng.random((n_states, n_actions))
-        expert_actions = rng.integers(n_actions, size=(horizon, n_states))
-        expert = np.zeros((horizon, n_states, n_actions))
-        expert[np.arange(horizon)[:, None], np.arange(n_states), expert_actions] = 1.0
-        learner = 0.85 * expert + 0.15 * random_policy(rng, horizon, n_states, n_actions)
-
-        def total_cost(pi):
-            d = lm.state_marginals(P, p0, pi)
-            return float(np.einsum("ts,tsa,sa->", d, pi, cost))
-
-        mistake = 1.0 - np.einsum("tsa,tsa->ts", learner, expert)  # e_t(s)
-        eps_expert = np.mean(np.sum(lm.state_marginals(P, p0, expert) * mistake, axis=1))
-        eps_learner = np.mean(np.sum(lm.state_marginals(P, p0, learner) * mistake, axis=1))
-        # Expert cost-to-go Q*_t, V*_t by backward recursion; u = max advantage.
-        V = np.zeros(n_states)
-        u = 0.0
-        for t in reversed(range(horizon)):
-            Q = cost + P @ V
-            V = np.einsum("sa,sa->s", expert[t], Q)
-            u = max(u, float(np.max(Q - V[:, None])))
-        gap = total_cost(learner) - total_cost(expert)
-        assert gap <= horizon**2 * eps_expert + 1e-12
-        assert gap <= u * horizon * eps_learner + 1e-12
-
-
 # ---------------------------------------------------------------------------
 # the per-step constant that segment comparisons cannot identify (lecture 6)
 # ---------------------------------------------------------------------------

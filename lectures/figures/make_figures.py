@@ -319,8 +319,197 @@ def overoptimisation(out_dir: Path) -> None:
     save(fig, out_dir, "overoptimisation.png")
 
 
+# ---------------------------------------------------------------- diagrams (chapters 3 and 6)
+
+
+def _box(ax: plt.Axes, x: float, y: float, w: float, h: float, title: str, body: str, colour: str = BLUE) -> None:
+    """A rounded box centred at (x, y) with a bold title and a smaller body."""
+    ax.add_patch(FancyBboxPatch((x - w / 2, y - h / 2), w, h, boxstyle="round,pad=0.02", fc="#eef3fa", ec=colour))
+    ax.text(x, y + h * 0.2, title, ha="center", va="center", fontsize=10, weight="bold")
+    ax.text(x, y - h * 0.18, body, ha="center", va="center", fontsize=9)
+
+
+def _arrow(ax: plt.Axes, start: tuple, end: tuple, label: str = "", rad: float = 0.0, colour: str = "black",
+           offset: tuple = (0.0, 0.0)) -> None:
+    """An arrow from ``start`` to ``end``, with a label at its midpoint shifted by ``offset``."""
+    ax.add_patch(FancyArrowPatch(start, end, connectionstyle=f"arc3,rad={rad}", arrowstyle="-|>",
+                                 mutation_scale=15, color=colour, lw=1.3))
+    if label:
+        ax.text((start[0] + end[0]) / 2 + offset[0], (start[1] + end[1]) / 2 + offset[1], label,
+                ha="center", va="center", fontsize=8.5, color=colour)
+
+
+def maxent_irl_loop(out_dir: Path) -> None:
+    """One iteration of tabular MaxEnt IRL: backward soft VI, forward visitation, gradient step."""
+    fig, ax = plt.subplots(figsize=(9.5, 3.6))
+    _box(ax, 0.13, 0.72, 0.22, 0.3, "weights $w$", "reward $r_w(s,a) = w^\\top f(s,a)$")
+    _box(ax, 0.5, 0.72, 0.26, 0.3, "backward pass", "soft value iteration\n$Q_t, V_t = \\mathrm{lse}_a Q_t$, $\\pi^w_t$")
+    _box(ax, 0.87, 0.72, 0.22, 0.3, "forward pass", "$d_{t+1} = d_t \\pi^w_t P$\n$\\rho_w = \\sum_t d_t \\pi^w_t$")
+    _box(ax, 0.68, 0.2, 0.3, 0.28, "gradient", "$\\hat\\mu_E - \\sum_{s,a} \\rho_w(s,a) f(s,a)$", GREEN)
+    _box(ax, 0.2, 0.2, 0.26, 0.28, "demonstrations", "$\\hat\\mu_E = \\frac{1}{N}\\sum_i F(\\tau_i)$", GREY)
+    _arrow(ax, (0.24, 0.72), (0.37, 0.72))
+    _arrow(ax, (0.63, 0.72), (0.76, 0.72), "$\\pi^w$", offset=(0, 0.05))
+    _arrow(ax, (0.87, 0.57), (0.78, 0.34), "$\\rho_w$", offset=(0.04, 0))
+    _arrow(ax, (0.33, 0.2), (0.53, 0.2))
+    _arrow(ax, (0.56, 0.34), (0.17, 0.57), "$w \\leftarrow w + \\eta\\,\\nabla$", rad=-0.25, colour=GREEN,
+           offset=(0.08, -0.05))
+    ax.text(0.5, 0.95, "repeat until the expected features match the demonstrations'", ha="center", fontsize=9,
+            color=GREY)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.axis("off")
+    save(fig, out_dir, "maxent_irl_loop.png")
+
+
+def christiano_loop(out_dir: Path) -> None:
+    """The three asynchronous processes of Christiano et al. (2017)."""
+    fig, ax = plt.subplots(figsize=(9.5, 3.6))
+    _box(ax, 0.14, 0.7, 0.24, 0.3, "policy $\\pi_\\theta$", "RL (A2C, TRPO, PPO)\non $\\hat r_\\phi(s, a)$")
+    _box(ax, 0.5, 0.7, 0.24, 0.3, "environment", "no reward signal;\nobservations, actions")
+    _box(ax, 0.86, 0.7, 0.24, 0.3, "human", "watches two clips,\nsays which is better")
+    _box(ax, 0.5, 0.17, 0.34, 0.28, "reward model $\\hat r_\\phi$", "Bradley–Terry on segment returns", GREEN)
+    _arrow(ax, (0.26, 0.75), (0.38, 0.75), "actions", offset=(0, 0.05))
+    _arrow(ax, (0.38, 0.65), (0.26, 0.65), "observations", offset=(0, -0.05))
+    _arrow(ax, (0.62, 0.7), (0.74, 0.7), "segment pairs", offset=(0, 0.05))
+    _arrow(ax, (0.86, 0.55), (0.67, 0.2), "comparisons", offset=(0.08, 0.02))
+    _arrow(ax, (0.33, 0.2), (0.14, 0.55), "predicted reward", offset=(-0.1, 0.0), colour=GREEN)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 0.95)
+    ax.axis("off")
+    save(fig, out_dir, "christiano_loop.png")
+
+
+def ppo_clip(out_dir: Path) -> None:
+    """One sample's clipped objective against the ratio, for a positive and a negative advantage."""
+    eps = 0.2
+    ratio = np.linspace(0.0, 2.0, 401)
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.3), sharey=False)
+    for ax, adv in zip(axes, (1.0, -1.0)):
+        clipped = np.minimum(ratio * adv, np.clip(ratio, 1 - eps, 1 + eps) * adv)
+        ax.plot(ratio, ratio * adv, color=GREY, ls="--", label=r"$\mathrm{ratio}\cdot\hat A$")
+        ax.plot(ratio, clipped, color=BLUE if adv > 0 else RED, lw=2.2, label=r"$L^{\mathrm{CLIP}}$ term")
+        for edge in (1 - eps, 1 + eps):
+            ax.axvline(edge, color=GREY, lw=0.6, ls=":")
+        ax.axvline(1.0, color="black", lw=0.6)
+        ax.set_xlabel(r"ratio $\pi_\theta(a\mid s)/\pi_{\mathrm{old}}(a\mid s)$")
+        ax.set_title(r"$\hat A = %+d$" % adv)
+        ax.legend(frameon=False, loc="upper left" if adv > 0 else "lower left")
+    axes[0].set_ylabel("objective (to maximise)")
+    save(fig, out_dir, "ppo_clip.png")
+
+
+def _gae_targets(rewards: np.ndarray, values: np.ndarray, dones: np.ndarray, last_value: float,
+                 gamma: float, lam: float) -> np.ndarray:
+    """Critic targets A + V from the backward recursion of chapter 6 (one environment)."""
+    adv, next_adv, next_value = np.zeros_like(rewards), 0.0, last_value
+    for t in reversed(range(len(rewards))):
+        alive = 1.0 - dones[t]
+        delta = rewards[t] + gamma * alive * next_value - values[t]
+        next_adv = delta + gamma * lam * alive * next_adv
+        adv[t], next_value = next_adv, values[t]
+    return adv + values
+
+
+def gae_truncation(out_dir: Path) -> None:
+    """Value targets near a time limit: truncation treated as termination vs bootstrapped."""
+    gamma, lam, limit = 0.99, 0.95, 50
+    true_value = 1.0 / (1.0 - gamma)
+    steps = np.arange(2 * limit)
+    values = np.full(2 * limit, true_value)  # exact critic: reward 1 forever from every state
+    dones = ((steps + 1) % limit == 0).astype(float)
+    as_termination = _gae_targets(np.ones(2 * limit), values, dones, true_value, gamma, lam)
+    bootstrapped = _gae_targets(1.0 + dones * gamma * true_value, values, dones, true_value, gamma, lam)
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    ax.plot(steps, as_termination, color=ORANGE, lw=2, label="time limit treated as termination")
+    ax.plot(steps, bootstrapped, color=BLUE, lw=2, label=r"bootstrapped: $r + \gamma V(s^{\mathrm{final}})$")
+    ax.axhline(true_value, color=GREY, ls=":", lw=1)
+    ax.set_xlabel("step in the buffer (episodes of 50 steps)")
+    ax.set_ylabel(r"critic target $\hat G_t$")
+    ax.set_ylim(0, 110)
+    ax.legend(frameon=False, loc="lower left")
+    save(fig, out_dir, "gae_truncation.png")
+
+
+# ---------------------------------------------------------------- chapter 2
+
+
+def feature_matching_projection(out_dir: Path) -> None:
+    """Abbeel and Ng's projection method in a two-feature MDP (feature expectations of all policies)."""
+    rng = np.random.default_rng(4)
+    n_states, n_actions, gamma = 6, 2, 0.8
+    P = rng.dirichlet(np.ones(n_states) * 0.5, size=(n_states, n_actions))
+    p0 = np.full(n_states, 1.0 / n_states)
+    f = rng.uniform(0.0, 1.0, size=(n_states, n_actions, 2))
+
+    def mu_of(pi: np.ndarray) -> np.ndarray:
+        rho = np.linalg.solve(np.eye(n_states) - gamma * np.einsum("sa,sax->sx", pi, P).T, p0)
+        return (1 - gamma) * np.einsum("s,sa,sak->k", rho, pi, f)
+
+    corners = []  # feature expectations of all deterministic stationary policies
+    for code in range(n_actions**n_states):
+        acts = (code // n_actions ** np.arange(n_states)) % n_actions
+        corners.append(mu_of(np.eye(n_actions)[acts]))
+    corners = np.array(corners)
+    expert = mu_of(rng.dirichlet(np.ones(n_actions), size=n_states))
+
+    mu = [corners[0]]
+    bar = corners[0]
+    path = [bar]
+    for _ in range(6):
+        w = expert - bar
+        mu_j = corners[np.argmax(corners @ w)]  # an optimal policy for r_w (best corner)
+        step = mu_j - bar
+        bar = bar + (step @ (expert - bar)) / (step @ step) * step
+        mu.append(mu_j)
+        path.append(bar)
+    mu, path = np.array(mu), np.array(path)
+
+    fig, ax = plt.subplots(figsize=(5.6, 4.4))
+    ax.scatter(corners[:, 0], corners[:, 1], s=6, color=GREY, label="deterministic policies")
+    ax.scatter(mu[:, 0], mu[:, 1], s=40, facecolors="none", edgecolors=BLUE, label=r"$\mu_j$ (RL step)")
+    ax.plot(path[:, 0], path[:, 1], "-o", color=GREEN, ms=4, label=r"$\bar\mu_j$ (projections)")
+    ax.scatter(*expert, marker="*", s=160, color=RED, zorder=5, label=r"$\hat\mu_E$")
+    ax.annotate(r"$w_1 = \hat\mu_E - \bar\mu_0$", xy=expert, xytext=path[0] + np.array([-0.04, 0.04]),
+                arrowprops=dict(arrowstyle="->", color=RED, lw=1), fontsize=9, color=RED)
+    ax.set_xlabel("expected feature 1")
+    ax.set_ylabel("expected feature 2")
+    ax.legend(frameon=False, fontsize=8, loc="best")
+    save(fig, out_dir, "feature_matching_projection.png")
+
+
+# ---------------------------------------------------------------- chapter 1
+
+
+def bc_multimodal(out_dir: Path) -> None:
+    """Two ways around an obstacle: the squared-error fit averages them, a mixture does not."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1, 1, size=400)
+    side = rng.random(400) < 0.5
+    steer = np.where(side, 1.0, -1.0) * np.exp(-(x**2) / 0.3) + 0.08 * rng.normal(size=400)
+    grid = np.linspace(-1, 1, 200)
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    ax.scatter(x, steer, s=6, color=GREY, label="demonstrations (pass left or right)")
+    mean_fit = np.polyval(np.polyfit(x, steer, 6), grid)  # least squares over polynomials of degree 6
+    ax.plot(grid, mean_fit, color=RED, lw=2, label="squared-error fit: the mean")
+    for sign, lbl in ((1, "mixture components"), (-1, None)):
+        ax.plot(grid, sign * np.exp(-(grid**2) / 0.3), color=BLUE, lw=2, ls="--", label=lbl)
+    ax.axvspan(-0.12, 0.12, color=RED, alpha=0.1)
+    ax.text(0, -1.35, "obstacle", ha="center", color=RED, fontsize=9)
+    ax.set_xlabel("distance to the obstacle (state)")
+    ax.set_ylabel("steering (action)")
+    ax.set_ylim(-1.5, 2.1)
+    ax.legend(frameon=False, fontsize=8, loc="upper center", ncol=2)
+    save(fig, out_dir, "bc_multimodal.png")
+
+
 FIGURES = [
     compounding_error,
+    bc_multimodal,
+    feature_matching_projection,
+    maxent_irl_loop,
+    christiano_loop,
+    ppo_clip,
+    gae_truncation,
     gridworld_soft_vi,
     lottery_bias,
     feedback_spectrum,
