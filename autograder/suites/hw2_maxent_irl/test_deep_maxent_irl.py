@@ -47,6 +47,33 @@ def test_shapes_and_history(student):
     assert len(hist["grad_norm"]) == 5 and len(hist["log_likelihood"]) == 5, "record one value per iteration"
 
 
+@stub("deep_maxent_irl", points=1, hint="Record before each update: entry 0 belongs to the network as initialised under "
+                                        "torch.manual_seed(seed); log_likelihood is the mean over trajectories of the sum "
+                                        "over time of log pi_t(a_t | s_t); grad_norm the Euclidean norm of D_expert - D_model.")
+def test_history_values(student, reference):
+    """The first entries of both histories are those of the initial network, and the log-likelihood rises"""
+    world, demos = _world()
+    args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+    _, hist = student.deep_maxent_irl(*args, n_iters=30)
+    _, want = reference.deep_maxent_irl(*args, n_iters=30)
+    assert isinstance(hist, dict) and {"grad_norm", "log_likelihood"} <= set(hist), \
+        "the history should be a dict with keys 'grad_norm' and 'log_likelihood'"
+    for key, what in (("log_likelihood", "the mean over trajectories of sum_t log pi_t(a_t | s_t), not a sum over "
+                                         "trajectories or a mean over time"),
+                      ("grad_norm", "the Euclidean norm of D_expert - D_model, with D_expert the mean visit counts "
+                                    "per trajectory")):
+        got = np.asarray(hist[key], dtype=float)
+        assert got.shape == (30,), f"history['{key}'] should hold one value per iteration (30), got shape {got.shape}"
+        first, ref = got[0], float(want[key][0])
+        if not np.isclose(first, ref, rtol=1e-4, atol=1e-6):
+            ratio = abs(first / ref) if ref else float("inf")
+            scale = (f"about {ratio:.0f} times too large" if ratio >= 2 else
+                     f"about {1 / ratio:.0f} times too small" if 0 < ratio <= 0.5 else "of the right size but wrong")
+            assert False, f"history['{key}'][0], at the initial network, is {scale}: it should be {what}"
+    ll = np.asarray(hist["log_likelihood"], dtype=float)
+    assert ll[-1] > ll[0], "the log-likelihood should rise over the iterations"
+
+
 @stub("deep_maxent_irl", points=2, hint=HINT)
 def test_learns_as_well_as_reference(student, reference):
     """After 150 iterations the learned reward's soft policy earns about what the reference's does"""

@@ -32,6 +32,12 @@ def _loglik_and_gradient(reference, net, w, feats, origins, destinations, horizo
     return float(feats.mean(axis=0) @ w - mean_log_z), np.asarray(expected)
 
 
+def _magnitude(x):
+    """How far, as an order of magnitude only (never the value itself)."""
+    x = abs(float(x))
+    return "less than 0.01" if x < 0.01 else f"of the order of {10.0 ** np.floor(np.log10(x)):g}"
+
+
 def _call(client, net, feats, origins, destinations, horizon):
     return client.eval(f"fit_route_weights({NET}, feats, origins, destinations, horizon, n_iters=60)",
                        feats=feats, origins=origins, destinations=destinations, horizon=horizon, **_arrays(net))
@@ -47,7 +53,8 @@ def test_reaches_the_maximum_likelihood(student, reference):
     w_ref, _ = _call(reference, net, feats, origins, destinations, 45)
     got, expected = _loglik_and_gradient(reference, net, w, feats, origins, destinations, 45)
     want, _ = _loglik_and_gradient(reference, net, np.asarray(w_ref), feats, origins, destinations, 45)
-    assert got >= want - 1e-3, f"mean log-likelihood {got:.4f} at your weights, {want:.4f} at the reference's"
+    assert got >= want - 1e-3, (f"the mean log-likelihood at your weights is {_magnitude(want - got)} below the "
+                                "maximum (0.001 is allowed): run the optimiser to convergence on the mean, not the sum")
     gap = np.abs(feats.mean(axis=0) - expected).max()
     assert gap < 2e-2, f"expected route features differ from the data's by {gap:.3f} at your weights"
 
@@ -60,6 +67,7 @@ def test_history_rises(student, reference):
     hist = np.asarray(hist, dtype=float)
     assert hist.ndim == 1 and hist.size >= 2, f"the history should be a 1-D array of log-likelihoods, got shape {hist.shape}"
     at_zero, _ = _loglik_and_gradient(reference, net, np.zeros(feats.shape[1]), feats, origins, destinations, 30)
-    assert np.isclose(hist[0], at_zero, rtol=1e-6), \
-        f"the first entry should be the mean log-likelihood at w = 0, {at_zero:.4f}; got {hist[0]:.4f}"
-    assert hist[-1] > hist[0], f"the log-likelihood went from {hist[0]:.3f} to {hist[-1]:.3f}"
+    assert np.isclose(hist[0], at_zero, rtol=1e-6), (
+        f"the first entry should be the mean log-likelihood per trip at w = 0; yours is {_magnitude(hist[0] - at_zero)} "
+        f"{'above' if hist[0] > at_zero else 'below'} it (record before the first step, and average over trips)")
+    assert hist[-1] > hist[0], "the recorded log-likelihood should end higher than it starts"

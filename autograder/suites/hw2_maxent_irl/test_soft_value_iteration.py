@@ -27,12 +27,18 @@ def test_matches_reference(student, reference, rng):
 
 @stub("soft_value_iteration", points=1, hint=HINT)
 def test_distributions_and_last_step(student, rng):
-    """Each pi[t, s] sums to one; the last step is uniform"""
+    """Each pi[t, s] sums to one; the last step is uniform; the step before it is softmax_a(P[s, a] . r)"""
     m = mdp(4)
-    pi = student.soft_value_iteration(m.P, rng.normal(size=m.n_states), 6)
+    reward = rng.normal(size=m.n_states)
+    pi = student.soft_value_iteration(m.P, reward, 6)
     assert np.shape(pi) == (6, m.n_states, m.n_actions), f"expected shape (T, S, A) = (6, 15, 3), got {np.shape(pi)}"
     check_array(pi.sum(axis=-1), np.ones((6, m.n_states)), name="the sum over actions of pi[t, s]")
     check_array(pi[-1], np.full((m.n_states, m.n_actions), 1.0 / m.n_actions), name="pi at the last step t = T-1")
+    # V_{T-1}(s') = r(s') + log A, so pi_{T-2}(a|s) is proportional to exp(P[s, a] . r): a closed form.
+    logits = m.P @ reward
+    closed = np.exp(logits - logits.max(axis=1, keepdims=True))
+    check_array(pi[-2], closed / closed.sum(axis=1, keepdims=True), rtol=1e-6, atol=1e-9,
+                name="pi at t = T-2 (one step of look-ahead: softmax over a of sum_s' P(s'|s,a) r(s'))")
 
 
 @stub("soft_value_iteration", points=1, hint=HINT)
@@ -46,11 +52,12 @@ def test_extreme_rewards(student, reference, rng):
 
 
 @stub("soft_value_iteration", points=1, hint=HINT)
-def test_invariant_to_constant_shift(student, rng):
-    """pi(r + c) == pi(r) for c = 5 and c = -40"""
+def test_invariant_to_constant_shift(student, reference, rng):
+    """pi(r + c) == pi(r) for c = 5 and c = -40, and pi(r) is the soft-optimal policy"""
     m = mdp(6)
     reward = rng.normal(size=m.n_states)
     base = student.soft_value_iteration(m.P, reward, 7)
+    check_array(base, reference.soft_value_iteration(m.P, reward, 7), rtol=1e-6, atol=1e-9, name="the policy of r")
     for c in (5.0, -40.0):
         check_array(student.soft_value_iteration(m.P, reward + c, 7), base, rtol=1e-6, atol=1e-9,
                     name=f"the policy of r + {c:g} (should equal that of r)")

@@ -28,14 +28,18 @@ def test_matches_reference(student, reference, rng):
 
 
 @stub("state_visitation_frequency", points=1, hint=HINT)
-def test_sums_to_horizon_and_starts_at_p0(student, rng):
-    """sum(D) == T for T = 1, 4, 13, and D == p0 when T = 1"""
+def test_sums_to_horizon_and_starts_at_p0(student, reference, rng):
+    """sum(D) == T for T = 1, 4, 13, D == p0 when T = 1, and D moves with the dynamics (not T * p0) for T = 4"""
     m = mdp(12)
     for horizon in (1, 4, 13):
         got = student.state_visitation_frequency(m.P, _time_varying_policy(rng, horizon, m), m.p0, horizon)
         check_scalar(float(np.sum(got)), float(horizon), name=f"the total expected visits for T = {horizon}")
     check_array(student.state_visitation_frequency(m.P, _time_varying_policy(rng, 1, m), m.p0, 1), m.p0,
                 name="D for T = 1")
+    policy = _time_varying_policy(rng, 4, m)
+    got = student.state_visitation_frequency(m.P, policy, m.p0, 4)
+    assert not np.allclose(got, 4 * m.p0), "D for T = 4 is T * p0: the distribution must move with P and pi after each step"
+    check_array(got, reference.state_visitation_frequency(m.P, policy, m.p0, 4), name="D for T = 4")
 
 
 @stub("state_visitation_frequency", points=1, hint=HINT)
