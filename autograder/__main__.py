@@ -8,6 +8,8 @@
   assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
+  mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/mutants.py)
+  nbgrader-sync, feedback, export, regrade, results-diff   the term after batch (autograder/outputs/cli.py)
 """
 from __future__ import annotations
 
@@ -17,37 +19,37 @@ from pathlib import Path
 
 
 def _cmd_grade(args: argparse.Namespace) -> int:
-    from autograder.grader import Grader
-    from autograder.report import summary_lines, write_outputs
-    from autograder.results import GraderError
-
     from autograder import course
     from autograder.batch import choose_notebook, notebooks_in
+    from autograder.grader import Grader
+    from autograder.report import plain, summary_lines, write_outputs
+    from autograder.results import GraderError
 
-    notebook, note = args.notebook, ""
-    if notebook.is_dir():  # a submission folder: pick its notebook as batch grading would
-        course.check_assignment(args.assignment)
-        entry = choose_notebook(notebook.name, notebooks_in(notebook), args.assignment,
-                                course.stub_names(args.assignment))
-        if entry.notebook is None:
-            raise SystemExit(f"{notebook}: {entry.problem}")
-        notebook, note = entry.notebook, entry.note
+    course.check_assignment(args.assignment)
+    entry = None
+    if args.notebook.is_dir() and not args.notebook.is_symlink():  # a submission folder: pick as batch would
+        notebooks, skipped = notebooks_in(args.notebook)
+        entry = choose_notebook(args.notebook.name, notebooks, args.assignment, course.stub_names(args.assignment),
+                                skipped)
     try:
         grader = Grader(args.assignment)
     except GraderError as err:
         return _grader_failed(str(err))
     try:
-        result = grader.grade(notebook)
+        if entry is not None and entry.notebook is None:  # nothing to grade: the submission's problem, recorded
+            result = grader.ungradable(args.notebook.name, entry.problem)
+        else:  # a link, a device or a non-notebook comes back as ungradable, with the reason
+            result = grader.grade(entry.notebook if entry else args.notebook)
     finally:
         grader.close()
     if not result.has_score:
         return _grader_failed(result.error)
-    if note:
-        result.notes.insert(0, note)
+    if entry is not None and entry.note:
+        result.notes.insert(0, entry.note)
     write_outputs(result, args.out)
     _warn_isolation(result.isolation)
     print("\n".join(summary_lines(result)))
-    print(f"wrote {args.out / 'results.json'} and {args.out / 'feedback.md'}")
+    print(f"wrote {plain(str(args.out / 'results.json'))} and {plain(str(args.out / 'feedback.md'))}")
     return 0
 
 
@@ -56,7 +58,9 @@ GRADER_FAULT_EXIT = 3
 
 
 def _grader_failed(reason: str) -> int:
-    print(f"NOT GRADED: the grader itself failed, so no score was written.\n  {reason}\n"
+    from autograder.report import plain
+
+    print(f"NOT GRADED: the grader itself failed, so no score was written.\n  {plain(reason)}\n"
           "This is not the submission's fault. Check the course set-up (`make test` runs the grader's own "
           "tests), fix it, then grade again.", file=sys.stderr)
     return GRADER_FAULT_EXIT
@@ -70,6 +74,7 @@ def _warn_isolation(level: str) -> None:
 
 def _cmd_batch(args: argparse.Namespace) -> int:
     from autograder.batch import GRADEBOOK_NAME, run_batch
+    from autograder.report import plain
 
     from autograder.results import GRADED, GRADER_ERROR, UNGRADABLE
 
@@ -80,7 +85,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
           f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {args.out / GRADEBOOK_NAME}")
     if count[GRADER_ERROR]:
         failed = next(r for r in results if r.status == GRADER_ERROR)
-        print(f"the grader failed on {count[GRADER_ERROR]} submission(s), e.g. {failed.submission}: {failed.error}\n"
+        print(f"the grader failed on {count[GRADER_ERROR]} submission(s), e.g. {plain(failed.submission)}: "
+              f"{plain(failed.error or '')}\n"
               "their rows have status grader_error and no score; fix the grader and run the same command again "
               "to grade just those", file=sys.stderr)
         return GRADER_FAULT_EXIT
@@ -132,6 +138,12 @@ def _cmd_samples(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_mutants(args: argparse.Namespace) -> int:
+    from autograder.mutants import command
+
+    return command(args.assignment, args.stub or None, args.max_per_stub, args.seed, args.out)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m autograder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -171,6 +183,16 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("samples", help="regenerate sample submissions")
     p.add_argument("assignment")
     p.set_defaults(fn=_cmd_samples)
+    p = sub.add_parser("mutants", help="grade mutants of each solution stub with its hidden tests and public check")
+    p.add_argument("assignment")
+    p.add_argument("--stub", action="append", default=[], help="only this stub (repeatable)")
+    p.add_argument("--max-per-stub", type=int, default=None, help="grade a seeded sample of at most N mutants per stub")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, default=None, help="report folder (default build/mutants/<id>)")
+    p.set_defaults(fn=_cmd_mutants)
+    from autograder.outputs.cli import add_commands
+
+    add_commands(sub)
     args = parser.parse_args(argv)
     return args.fn(args)
 

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
 import re
+import stat
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -18,7 +20,8 @@ from pathlib import Path
 
 from autograder import course
 from autograder.grader import Grader
-from autograder.notebook import NotebookError, find_stubs, read_submission
+from autograder.intake import NotebookError, read_code_cells, walk_notebooks
+from autograder.notebook import find_stubs
 from autograder.report import RESULT_NAME, write_gradebook, write_outputs
 from autograder.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, result_from_dict
 from rlcourse.progress import progress as shown_progress
@@ -62,33 +65,45 @@ def unique_safe_names(names: list[str]) -> list[str]:
     return out
 
 
-def notebooks_in(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.rglob("*.ipynb") if ".ipynb_checkpoints" not in p.parts and p.is_file())
+def notebooks_in(folder: Path) -> tuple[list[Path], list[str]]:
+    """The notebooks of a submission folder, found without following links, and what was skipped (why)."""
+    return walk_notebooks(folder)
 
 
-def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected: list[str]) -> Entry:
+def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected: list[str],
+                    skipped: list[str] = ()) -> Entry:
+    """The notebook to grade among a submission's ``notebooks``; ``skipped`` are the files left out (links)."""
+    skipped_note = ("left out: " + "; ".join(skipped[:5]) + (f" and {len(skipped) - 5} more" if len(skipped) > 5 else "")
+                    if skipped else "")
     if not notebooks:
-        return Entry(name, None, problem="no notebook (.ipynb) in this submission")
+        return Entry(name, None, problem="no notebook (.ipynb) in this submission"
+                     + (f" ({skipped_note})" if skipped_note else ""))
     if len(notebooks) == 1:
-        return Entry(name, notebooks[0])
+        return Entry(name, notebooks[0], note=skipped_note)
     named = [p for p in notebooks if p.stem == assignment]
     if len(named) == 1:
         chosen = named[0]
     else:  # the notebook with the most stubs done (found and no longer raising NotImplementedError)
         def progress(path: Path) -> tuple[int, int, float]:
             try:
-                found = find_stubs(read_submission(path)[0], expected)[0]
-            except (NotebookError, OSError):
+                found = find_stubs(read_code_cells(path)[0], expected)[0]
+            except (NotebookError, GraderError):
                 return (-1, -1, 0.0)
             done = sum("raise NotImplementedError" not in m.source for m in found.values())
-            return (done, len(found), path.stat().st_mtime)
+            return (done, len(found), os.lstat(path).st_mtime)
         chosen = max(notebooks, key=progress)
-    others = ", ".join(p.name for p in notebooks if p != chosen)
-    return Entry(name, chosen, note=f"several notebooks were submitted; graded {chosen.name} (not {others})")
+    others = [p.name for p in notebooks if p != chosen]
+    listed = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
+    note = f"several notebooks were submitted; graded {chosen.name} (not {listed})"
+    return Entry(name, chosen, note=note + (f"; {skipped_note}" if skipped_note else ""))
 
 
 def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
-    """One entry per submission in ``folder`` (see the module docstring for the layouts)."""
+    """One entry per submission in ``folder`` (see the module docstring for the layouts).
+
+    Nothing a student submitted is followed if it is a link: a submission that is one, or a
+    notebook that is not a regular file, is listed with its reason and graded as nothing.
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise SystemExit(f"{folder} is not a folder of submissions")
@@ -98,11 +113,24 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
     for child in sorted(folder.iterdir()):
         if child.name.startswith(".") or child.name in ("submission_metadata.yml",):
             continue
-        if child.is_file() and child.suffix == ".ipynb":
-            entries.append(Entry(child.stem, child))
-        elif child.is_dir():
-            inner = child / assignment if (child / assignment).is_dir() else child
-            entries.append(choose_notebook(child.name, notebooks_in(inner), assignment, expected))
+        mode = os.lstat(child).st_mode
+        if stat.S_ISLNK(mode):
+            if child.suffix == ".ipynb" or child.is_dir():
+                stem = child.stem if child.suffix == ".ipynb" else child.name
+                entries.append(Entry(stem, None, problem=f"{child.name} is a symbolic link: the grader does not follow links"))
+        elif child.suffix == ".ipynb" and not stat.S_ISDIR(mode):
+            if stat.S_ISREG(mode):
+                entries.append(Entry(child.stem, child))
+            else:
+                entries.append(Entry(child.stem, None, problem=f"{child.name} is not a regular file: it was not read"))
+        elif stat.S_ISDIR(mode):
+            inner = child / assignment
+            if os.path.islink(inner):
+                entries.append(Entry(child.name, None, problem=f"{child.name}/{assignment} is a symbolic link: "
+                                                               "the grader does not follow links"))
+                continue
+            notebooks, skipped = notebooks_in(inner if inner.is_dir() else child)
+            entries.append(choose_notebook(child.name, notebooks, assignment, expected, skipped))
     for entry, name in zip(entries, unique_safe_names([e.name for e in entries])):
         entry.name = name
     return entries

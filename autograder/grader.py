@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 from autograder import course
-from autograder.notebook import (NotebookError, find_stubs, imported_modules, manual_cells, read_notebook,
-                                 read_submission, release_plan, with_parameters)
+from autograder.intake import NotebookError, read_code_cells
+from autograder.notebook import find_stubs, imported_modules, manual_cells, read_notebook, release_plan, with_parameters
 from autograder.results import (GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, StubResult, TestOutcome)
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
@@ -85,11 +85,15 @@ class SuitePlugin:
         status = self.status.get(stub)
         if status is not None and not status.ok:
             pytest.fail(status.message, pytrace=False)
+        if self.session is not None:  # from here, the test's calls share one deadline
+            self.session.begin_test()
         # The other stubs this one calls run as the reference while it is tested: one mistake, one loss.
         needed = self.dependencies.get(stub, [])
         if self.session is not None and needed:
             self.session.stand_in(needed)
         yield self.student_ns
+        if self.session is not None:
+            self.session.end_test()
         if self.session is not None and needed:
             try:
                 self.session.restore()
@@ -225,13 +229,18 @@ class Grader:
         path = Path(path)
         result = GradeResult(self.assignment, name or path.name, [], list(self.manual))
         try:
-            nb, notes = read_submission(path)
-        except (NotebookError, OSError) as err:
+            nb, notes = read_code_cells(path)
+        except NotebookError as err:
             return self._ungradable(result, f"could not read the notebook: {err}", start)
+        except GraderError as err:
+            return self.grader_error(result.submission, str(err), result.notes, start)
         stubs, match_notes = find_stubs(nb, self.expected)
         result.notes += notes + match_notes
+        unrunnable = {name: match.problem for name, match in stubs.items() if match.problem}
+        stubs = {name: match for name, match in stubs.items() if not match.problem}
         session = Session(self.zygote, self.cells_for(stubs), self.config, reference_call=self._reference_call,
-                          missing=[s for s in self.expected if s not in stubs])
+                          missing=[s for s in self.expected if s not in stubs and s not in unrunnable],
+                          unrunnable=unrunnable)
         try:
             session.start()
             broken_setup = [s.message for label, s in session.status.items()

@@ -83,7 +83,7 @@ def run(assignment: str, root: Path) -> int:
     Gradescope then shows "The autograder failed to execute correctly" (and the student may
     resubmit), never a score of 0 for a fault that is not theirs.
     """
-    from autograder.batch import choose_notebook
+    from autograder.batch import choose_notebook, notebooks_in
     from autograder.grader import Grader
     from autograder.report import gradescope_results
     from autograder.results import GraderError
@@ -91,8 +91,8 @@ def run(assignment: str, root: Path) -> int:
     results = root / "results" / "results.json"
     results.parent.mkdir(parents=True, exist_ok=True)
     results.unlink(missing_ok=True)
-    entry = choose_notebook("submission", sorted((root / "submission").rglob("*.ipynb")), assignment,
-                            course.stub_names(assignment))
+    notebooks, skipped = notebooks_in(root / "submission")  # links in the upload are named, never followed
+    entry = choose_notebook("submission", notebooks, assignment, course.stub_names(assignment), skipped)
     try:
         grader = Grader(assignment)
     except GraderError as err:

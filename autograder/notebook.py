@@ -1,43 +1,35 @@
-"""Reading notebooks as the grader needs them: tolerant of damage, exact about cells.
+"""Notebooks as the grader needs them: the course's own (release plan, written answers, parameters) and
+the matching of a submission's cells to stubs.
 
 A submission may be anything a student's upload can be: not JSON, an old
 nbformat, empty, huge, not UTF-8, with cells reordered or deleted and metadata
-stripped. :func:`read_submission` turns each of those into a clear message
-instead of a traceback, and :func:`find_stubs` matches cells by nbgrader
-``grade_id`` first and by the name of the function or class a cell defines as a
-fallback, so lost metadata costs nothing when the code is there.
+stripped; :mod:`autograder.intake` reads it safely and turns each of those into
+a clear message. :func:`find_stubs` matches cells by nbgrader ``grade_id`` first
+and by the name of the function or class a cell defines as a fallback, so lost
+metadata costs nothing when the code is there.
 """
 from __future__ import annotations
 
 import ast
-import json
-import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import nbformat
 
-MAX_NOTEBOOK_BYTES = 50 * 1024 * 1024
+from autograder.intake import (MAX_NOTEBOOK_BYTES, CodeCell, NotebookError, SubmittedNotebook, defined_names,
+                               read_cells)
+
+__all__ = ["MAX_NOTEBOOK_BYTES", "NotebookError", "StubMatch", "defined_names", "find_stubs", "imported_modules",
+           "manual_cells", "read_notebook", "read_submission", "release_plan", "with_parameters"]
 PARAMETERS_TAG, SETUP_TAG = "parameters", "setup"
-
-
-class NotebookError(ValueError):
-    """A file that cannot be read as a notebook; the message says why, for the student."""
 
 
 @dataclass
 class StubMatch:
     source: str
     how: str  # "grade_id" or "name"
-
-
-@dataclass
-class Submission:
-    path: Path
-    notebook: nbformat.NotebookNode | None
-    stubs: dict[str, StubMatch] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
-    error: str | None = None
+    problem: str = ""
+    """Why the matched cell cannot be run (see :class:`autograder.intake.CodeCell`), or empty."""
 
 
 def _nbgrader(cell) -> dict:
@@ -56,72 +48,49 @@ def read_notebook(path: str | Path) -> nbformat.NotebookNode:
 
 
 def read_submission(path: str | Path) -> tuple[nbformat.NotebookNode, list[str]]:
-    """Parse an uploaded notebook; raise :class:`NotebookError` with a readable reason."""
-    path = Path(path)
-    notes: list[str] = []
-    size = path.stat().st_size
-    if size > MAX_NOTEBOOK_BYTES:
-        raise NotebookError(f"the notebook is {size / 2**20:.0f} MB, over the {MAX_NOTEBOOK_BYTES // 2**20} MB limit "
-                            "(clear the outputs: Kernel → Restart & Clear Output, then save)")
-    raw = path.read_bytes()
-    if not raw.strip():
-        raise NotebookError("the file is empty")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-        notes.append("the file is not valid UTF-8; it was read as Latin-1 (save notebooks from Jupyter to avoid this)")
-    try:
-        data = json.loads(text)
-    except (json.JSONDecodeError, RecursionError, ValueError) as err:
-        raise NotebookError(f"the file is not a Jupyter notebook (not valid JSON: {str(err)[:120]})") from None
-    if not isinstance(data, dict) or "cells" not in data and "worksheets" not in data:
-        raise NotebookError("the file is JSON but not a Jupyter notebook (it has no cells)")
-    major = data.get("nbformat")
-    if major not in (3, 4):
-        raise NotebookError(f"unsupported notebook format version {major!r}; open and save it in a current Jupyter")
-    try:
-        nb = nbformat.reads(json.dumps(data), as_version=4)
-    except Exception as err:  # noqa: BLE001 - nbformat raises many types on malformed input
-        raise NotebookError(f"the notebook's structure is damaged: {str(err)[:200]}") from None
-    if major == 3:
-        notes.append("the notebook was in the old format 3 and was converted")
-    if not nb.cells:
-        raise NotebookError("the notebook has no cells")
-    for cell in nb.cells:
-        if not isinstance(cell.get("source"), str):
-            cell["source"] = "".join(cell.get("source") or [])
+    """A submitted notebook, for the outputs that show it (the nbgrader gradebook); with notes.
+
+    Read as :func:`autograder.intake.read_cells` reads it (no link followed, within the size cap,
+    parsed in a child process within its budget): every cell's type, source, tags, nbgrader metadata
+    and Markdown attachments, and no outputs. Raises :class:`NotebookError` with the reason.
+    Grading itself needs only the code cells: :func:`autograder.intake.read_code_cells`.
+    """
+    cells, notes = read_cells(path)
+    made = {"code": nbformat.v4.new_code_cell, "markdown": nbformat.v4.new_markdown_cell,
+            "raw": nbformat.v4.new_raw_cell}
+    nb = nbformat.v4.new_notebook()
+    for cell in cells:
+        new = made[cell["cell_type"]](cell["source"], metadata=cell["metadata"])
+        if "attachments" in cell:
+            new.attachments = cell["attachments"]
+        nb.cells.append(new)
     return nb, notes
 
 
-def defined_names(source: str) -> list[str]:
-    """Top-level functions and classes a cell defines (by regex when the cell does not parse)."""
-    try:
-        tree = ast.parse(source)
-    except (SyntaxError, ValueError):
-        return re.findall(r"^(?:async\s+)?(?:def|class)\s+([A-Za-z_]\w*)", source, flags=re.M)
-    return [node.name for node in tree.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))]
+def _code_cells(nb: SubmittedNotebook | nbformat.NotebookNode) -> list[CodeCell]:
+    if isinstance(nb, SubmittedNotebook):
+        return nb.cells
+    return [CodeCell(c.get("source", ""), _nbgrader(c).get("grade_id"), defined_names(c.get("source", "")))
+            for c in nb.cells if c.get("cell_type") == "code"]
 
 
-def find_stubs(nb: nbformat.NotebookNode, expected: list[str]) -> tuple[dict[str, StubMatch], list[str]]:
+def find_stubs(nb: SubmittedNotebook | nbformat.NotebookNode, expected: list[str]) -> tuple[dict[str, StubMatch], list[str]]:
     """Match each expected stub to a code cell: by ``grade_id``, else by the name the cell defines.
 
     When several cells match, the last one wins, as it would when the notebook runs top to bottom.
+    ``nb`` is what :func:`autograder.intake.read_code_cells` returns (grading), or a notebook from
+    :func:`read_submission`.
     """
     by_id: dict[str, StubMatch] = {}
     by_name: dict[str, StubMatch] = {}
     notes: list[str] = []
-    for cell in nb.cells:
-        if cell.get("cell_type") != "code":
+    for cell in _code_cells(nb):
+        if cell.grade_id in expected:
+            by_id[cell.grade_id] = StubMatch(cell.source, "grade_id", cell.problem)
             continue
-        source = cell.get("source", "")
-        grade_id = _nbgrader(cell).get("grade_id")
-        if grade_id in expected:
-            by_id[grade_id] = StubMatch(source, "grade_id")
-            continue
-        for name in defined_names(source):
+        for name in cell.defines:
             if name in expected:
-                by_name[name] = StubMatch(source, "name")
+                by_name[name] = StubMatch(cell.source, "name", cell.problem)
     found = {}
     for name in expected:
         if name in by_id:

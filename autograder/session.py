@@ -16,7 +16,7 @@ from typing import Any, Callable, Iterable
 from autograder.results import GraderError
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import (ChannelClosed, ChannelTimeout, HandleRef, LentRef, ProtocolError, decode,
-                                     encode, send_message)
+                                     encode)
 from autograder.sandbox.worker import NotDefined, Worker
 from autograder.supervisor import SandboxStartError, WorkerProcess, Zygote
 
@@ -234,7 +234,8 @@ class Session(Transport):
     """
 
     def __init__(self, zygote: Zygote, cells: list[Cell], config: SpawnConfig,
-                 reference_call: ReferenceCall | None = None, missing: Iterable[str] = ()) -> None:
+                 reference_call: ReferenceCall | None = None, missing: Iterable[str] = (),
+                 unrunnable: dict[str, str] | None = None) -> None:
         super().__init__()
         self.zygote, self.cells, self.config = zygote, cells, config
         self.limits: Limits = config.limits
@@ -242,12 +243,14 @@ class Session(Transport):
         self.status: dict[str, CellStatus] = {
             name: CellStatus(False, f"no cell defines `{name}` (was its cell deleted, or the function renamed?)")
             for name in missing}
+        self.status.update({name: CellStatus(False, why) for name, why in (unrunnable or {}).items()})
         self.worker: WorkerProcess | None = None
         self.generation = 0
         self.time_used = 0.0
         self.isolation = "unknown"
         self.restarts = 0
         self.standing_in: frozenset[str] = frozenset()
+        self.test_deadline: float | None = None
 
     # -------------------------------------------------------------- lifecycle
 
@@ -274,7 +277,7 @@ class Session(Transport):
     def _exec(self, cell: Cell) -> CellStatus:
         try:
             self._raw({"op": "exec", "label": cell.label, "source": cell.source, "module": cell.module}, [],
-                      self.limits.exec_seconds)
+                      self.limits.exec_seconds, explicit=True)
             return CellStatus(True)
         except StudentError as err:
             if err.not_implemented:
@@ -308,21 +311,56 @@ class Session(Transport):
 
     # -------------------------------------------------------------- requests
 
-    def _raw(self, header: dict[str, Any], blobs: list[bytes], timeout: float) -> Any:
-        if self.time_used > self.limits.submission_seconds:
+    def begin_test(self) -> None:
+        """A hidden test starts: from now its calls share one deadline, ``test_seconds`` away."""
+        self.test_deadline = time.monotonic() + self.limits.test_seconds
+
+    def end_test(self) -> None:
+        self.test_deadline = None
+
+    def _deadline(self, timeout: float, explicit: bool) -> tuple[float, str]:
+        """When a request must be answered, and what the student is told if it is not.
+
+        The earliest of: the call's own limit, the test's deadline (unless the suite gave this call a
+        ``timeout`` of its own), and what is left of the submission's total time.
+        """
+        now = time.monotonic()
+        left = self.limits.submission_seconds - self.time_used
+        if left <= 0:
             raise SandboxTimeout(f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s")
-        timeout = min(timeout, self.limits.submission_seconds - self.time_used + 1)
+        bounds = [(now + timeout, f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)"),
+                  (now + left, f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s")]
+        if self.test_deadline is not None and not explicit:
+            bounds.append((self.test_deadline, f"ran past this test's time limit of {self.limits.test_seconds:.0f} s "
+                                               "(an infinite loop, or far too slow)"))
+        deadline, why = min(bounds)
+        if deadline <= now:
+            raise SandboxTimeout(why)
+        return deadline, why
+
+    def _raw(self, header: dict[str, Any], blobs: list[bytes], timeout: float, explicit: bool = False) -> Any:
+        """Send one request and read its answer, serving the worker's callbacks meanwhile, all by one deadline.
+
+        Every write and read of the exchange, and the grader's own work for callbacks (a reference stand-in,
+        a lent object's method), count against that deadline, so a worker that stops reading, answers
+        slowly or keeps calling back is stopped when it passes.
+        """
+        deadline, why = self._deadline(timeout, explicit)
         start = time.monotonic()
         try:
-            reply, reply_blobs = self.worker.request(header, blobs, timeout)
+            self.worker.send(header, blobs, deadline)
+            reply, reply_blobs = self.worker.receive(deadline)
             while "callback" in reply:  # the student's code called back into the grader: answer, read on
                 answer, answer_blobs = self._answer(reply, reply_blobs)
-                send_message(self.worker.to_fd, answer, answer_blobs)
-                reply, reply_blobs = self.worker.reader.read_message(max(0.1, start + timeout - time.monotonic()))
+                del reply_blobs
+                if time.monotonic() >= deadline:
+                    raise ChannelTimeout(why)
+                self.worker.send(answer, answer_blobs, deadline)
+                reply, reply_blobs = self.worker.receive(deadline)
             return _decode_reply(self, reply, reply_blobs)
         except ChannelTimeout:
             self.worker.kill()
-            raise SandboxTimeout(f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)") from None
+            raise SandboxTimeout(why) from None
         except (ChannelClosed, BrokenPipeError, OSError):
             tail = self.worker.tail().strip()
             self.worker.kill()
@@ -379,4 +417,4 @@ class Session(Transport):
         """A call from a test: restarts a dead worker first, so one test's crash does not fail the next."""
         if self.worker is None or not self.worker.alive:
             self._restart()
-        return self._raw(header, blobs, timeout or self.limits.call_seconds)
+        return self._raw(header, blobs, timeout or self.limits.call_seconds, explicit=timeout is not None)

@@ -18,12 +18,13 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import asdict
 from typing import Any
 
 from autograder.sandbox.config import SpawnConfig
 from autograder.sandbox.isolation import PR_SET_DUMPABLE, libc
-from autograder.sandbox.wire import FrameReader, send_message
+from autograder.sandbox.wire import MAX_MESSAGE_BYTES, FrameReader, send_message
 
 OUTPUT_KEEP = 4096
 """Bytes of a worker's stdout/stderr kept (the newest): enough context for a crash message."""
@@ -45,6 +46,7 @@ class Zygote:
         libc.prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)  # workers may not read the grader's memory
 
     def spawn(self, config: SpawnConfig) -> "WorkerProcess":
+        """A new worker isolated as ``config`` says; what it sends back is capped at its ``message_bytes``."""
         to_r, to_w = os.pipe()
         from_r, from_w = os.pipe()
         out_r, out_w = os.pipe()
@@ -53,7 +55,7 @@ class Zygote:
             socket.send_fds(self.sock, [message], [to_r, from_w, out_w])
         for fd in (to_r, from_w, out_w):
             os.close(fd)
-        return WorkerProcess(to_w, from_r, out_r)
+        return WorkerProcess(to_w, from_r, out_r, config.limits.message_bytes)
 
     def close(self) -> None:
         self.sock.close()
@@ -68,8 +70,9 @@ class SandboxStartError(RuntimeError):
 class WorkerProcess:
     """The grader's end of one worker: request channel, output capture, and kill."""
 
-    def __init__(self, to_fd: int, from_fd: int, out_fd: int) -> None:
-        self.to_fd, self.reader, self.out_fd = to_fd, FrameReader(from_fd), out_fd
+    def __init__(self, to_fd: int, from_fd: int, out_fd: int, max_message: int = MAX_MESSAGE_BYTES) -> None:
+        self.to_fd, self.reader, self.out_fd = to_fd, FrameReader(from_fd, max_message), out_fd
+        os.set_blocking(to_fd, False)  # every write has a deadline: a worker that stops reading cannot hold the grader
         self.output = bytearray()
         self.pid = self.pgid = None
         self.isolation = "unknown"
@@ -90,16 +93,21 @@ class WorkerProcess:
 
     def start(self, timeout: float) -> dict[str, Any]:
         """Read the launcher's pid report and the worker's ready message."""
-        header, _ = self.reader.read_message(timeout)
+        deadline = time.monotonic() + timeout
+        header, _ = self.reader.read_message(deadline=deadline)
         self.pid, self.pgid, self.isolation = header.get("pid"), header.get("pgid"), header.get("isolation")
-        ready, _ = self.reader.read_message(timeout)
+        ready, _ = self.reader.read_message(deadline=deadline)
         if not ready.get("ok"):
             raise SandboxStartError(ready.get("error", "the sandbox failed to start"))
         return header
 
-    def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float) -> tuple[dict[str, Any], list[bytes]]:
-        send_message(self.to_fd, header, blobs)
-        return self.reader.read_message(timeout)
+    def send(self, header: dict[str, Any], blobs: list[bytes], deadline: float) -> None:
+        """Write a message; raises ``ChannelTimeout`` if the worker has not taken it all by ``deadline``."""
+        send_message(self.to_fd, header, blobs, deadline)
+
+    def receive(self, deadline: float) -> tuple[dict[str, Any], list[bytearray]]:
+        """Read a message, whole and within the size cap, by ``deadline``."""
+        return self.reader.read_message(deadline=deadline)
 
     def tail(self) -> str:
         return bytes(self.output[-TAIL_CHARS:]).decode("utf-8", "replace")

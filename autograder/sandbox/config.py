@@ -9,12 +9,20 @@ from dataclasses import dataclass, field
 
 @dataclass
 class Limits:
-    """Resource limits of one worker; ``call_seconds``, ``exec_seconds`` and ``submission_seconds`` are
-    deadlines the grader enforces, the rest are kernel limits set in the worker."""
+    """Resource limits of one worker.
+
+    The grader enforces the deadlines and the message cap: ``call_seconds`` per call, ``test_seconds`` per
+    hidden test counted from its start (every call, write and callback of the test included: a worker that
+    keeps calling back cannot stretch it), ``exec_seconds`` per cell, ``submission_seconds`` for all of a
+    submission's time in the sandbox, and ``message_bytes``, the most one message from the worker may hold.
+    The rest are kernel limits set in the worker.
+    """
 
     call_seconds: float = 20.0
+    test_seconds: float = 180.0
     exec_seconds: float = 60.0
     submission_seconds: float = 600.0
+    message_bytes: int = 64 * 1024**2
     memory_bytes: int = 4 * 1024**3
     cpu_seconds: int = 900
     processes: int = 64

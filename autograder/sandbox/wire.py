@@ -24,14 +24,22 @@ from typing import Any, Callable
 
 import numpy as np
 
-MAX_FRAME = 256 * 1024 * 1024
-"""No single frame may exceed this (a value of 256 MB is far beyond any test)."""
-
+MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+"""A message (its header and all its blobs together) is at most this big unless the reader is given another cap
+(the grader uses its limits' ``message_bytes``): far beyond any test's values, and what bounds the memory a peer
+can make the reader allocate, since a frame's buffer is allocated only once its size is known to fit."""
+MAX_HEADER_BYTES = 4 * 1024 * 1024
+"""A message's JSON header (numbers, strings, lists and dicts; arrays travel as blobs) is at most this big."""
+MAX_HEADER_VALUES = 250_000
+"""A header holds at most this many JSON values (counted by its brackets and commas before it is parsed), so the
+parsed header stays within a few tens of MB: JSON like ``[[],[],...]`` would otherwise grow twenty-fold in memory."""
 MAX_DEPTH = 64
 """Values nest at most this deep: far beyond any test's data, and well inside Python's recursion limit
 on both sides (a student's value nested 10,000 deep must fail cleanly, not crash the grader)."""
 MAX_BLOBS = 10_000
 """Arrays in one message at most."""
+NPY_HEADER_BYTES = 65_536
+"""An ``.npy`` header is read from at most this many leading bytes of its blob."""
 TYPE_NAME_CHARS, QUOTED_CHARS = 100, 80
 """A type name crossing the wire is cut here (a student may name a class anything), and so is the piece of
 a malformed value an error message quotes."""
@@ -78,14 +86,28 @@ def _npy_bytes(array: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
-def _npy_array(blob: bytes) -> np.ndarray:
+def _npy_array(blob: bytes | bytearray) -> np.ndarray:
+    """The array in an ``.npy`` blob, without copying its data where the blob is writable (the grader reads
+    frames into ``bytearray``s): only the header is parsed apart, so a blob costs its own size in memory once."""
     try:
-        array = np.load(io.BytesIO(blob), allow_pickle=False)
-    except Exception as err:  # malformed npy or an object array
-        raise ProtocolError(f"bad array data: {err}") from None
-    if type(array) is not np.ndarray or array.dtype.kind not in ALLOWED_DTYPE_KINDS:
+        head = io.BytesIO(bytes(memoryview(blob)[:NPY_HEADER_BYTES]))
+        major, _ = np.lib.format.read_magic(head)
+        read_header = {1: np.lib.format.read_array_header_1_0, 2: np.lib.format.read_array_header_2_0}.get(major)
+        if read_header is None:
+            raise ValueError(f"npy version {major}")
+        shape, fortran, dtype = read_header(head, max_header_size=NPY_HEADER_BYTES)
+    except Exception as err:  # noqa: BLE001 - any malformed header
+        raise ProtocolError(f"bad array data: {str(err)[:QUOTED_CHARS]}") from None
+    if dtype.kind not in ALLOWED_DTYPE_KINDS or dtype.hasobject or dtype.fields is not None or dtype.subdtype:
         raise ProtocolError("arrays must be numeric numpy arrays")
-    return array
+    count = 1
+    for n in shape:
+        count *= int(n)
+    offset = head.tell()
+    if len(blob) - offset != count * dtype.itemsize:
+        raise ProtocolError("bad array data: its size does not match its shape")
+    array = np.frombuffer(blob, dtype=dtype, count=count, offset=offset).reshape(shape, order="F" if fortran else "C")
+    return array if array.flags.writeable else array.copy()
 
 
 def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, depth: int = 0) -> tuple[Any, list[bytes]]:
@@ -195,53 +217,98 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
 # ---------------------------------------------------------------- framing
 
 
-def _write_all(fd: int, data: bytes) -> None:
+def _wait(fd: int, event: int, deadline: float | None) -> None:
+    """Block until ``fd`` is ready for ``event`` (``select.POLLIN`` or ``POLLOUT``), or raise at ``deadline``."""
+    poller = select.poll()
+    poller.register(fd, event)
+    while True:
+        if deadline is None:
+            timeout_ms = None
+        else:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise ChannelTimeout("no answer in time" if event == select.POLLIN else "the other side stopped reading")
+            timeout_ms = max(1, int(remaining * 1000))
+        if poller.poll(timeout_ms):
+            return
+
+
+def _write_all(fd: int, data: bytes, deadline: float | None) -> None:
+    """Write all of ``data``; with a ``deadline``, on a non-blocking ``fd``, never block past it."""
     view = memoryview(data)
     while view:
-        n = os.write(fd, view)
+        try:
+            n = os.write(fd, view)
+        except BlockingIOError:
+            _wait(fd, select.POLLOUT, deadline)
+            continue
         view = view[n:]
+        if view and deadline is not None and time.monotonic() > deadline:
+            raise ChannelTimeout("the other side stopped reading")
 
 
-def send_message(fd: int, header: dict[str, Any], blobs: list[bytes] = ()) -> None:
-    """Write one message (header, then its blobs) to ``fd``."""
+def send_message(fd: int, header: dict[str, Any], blobs: list[bytes] = (), deadline: float | None = None) -> None:
+    """Write one message (header, then its blobs) to ``fd``.
+
+    ``deadline`` (a ``time.monotonic()`` value) bounds the write: a peer that stops reading cannot block the
+    writer for longer. The grader writes with one, on a non-blocking descriptor; a worker writes without.
+    """
     head = json.dumps(dict(header, nblobs=len(blobs)), allow_nan=False).encode()
-    _write_all(fd, b"".join([struct.pack(">I", len(head)), head, *(struct.pack(">I", len(b)) + b for b in blobs)]))
+    _write_all(fd, b"".join([struct.pack(">I", len(head)), head, *(struct.pack(">I", len(b)) + b for b in blobs)]),
+               deadline)
 
 
 class FrameReader:
-    """Reads messages from ``fd`` with an overall deadline per message."""
+    """Reads messages from ``fd``, each within a deadline and a size cap.
 
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        self.buffer = bytearray()
+    Frames are read straight into buffers of their announced size, allocated only after the size is known
+    to fit in what is left of the message's cap, and never past a frame's end: what a peer sends costs at most
+    ``max_message`` bytes, and a JSON header is parsed only when its count of values is within bounds.
+    """
 
-    def _read_exact(self, n: int, deadline: float | None) -> bytes:
-        while len(self.buffer) < n:
-            timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
-            ready, _, _ = select.select([self.fd], [], [], timeout)
-            if not ready:
-                raise ChannelTimeout("no answer in time")
-            chunk = os.read(self.fd, max(65536, n - len(self.buffer)))
-            if not chunk:
+    def __init__(self, fd: int, max_message: int = MAX_MESSAGE_BYTES) -> None:
+        self.fd, self.max_message = fd, max_message
+
+    def _read_exact(self, n: int, deadline: float | None) -> bytearray:
+        out = bytearray(n)
+        view, got = memoryview(out), 0
+        while got < n:
+            _wait(self.fd, select.POLLIN, deadline)
+            try:
+                k = os.readv(self.fd, [view[got:]])
+            except BlockingIOError:
+                continue
+            if not k:
                 raise ChannelClosed("the other side closed the channel")
-            self.buffer += chunk
-        data = bytes(self.buffer[:n])
-        del self.buffer[:n]
-        return data
+            got += k
+        return out
 
-    def _frame(self, deadline: float | None) -> bytes:
+    def _frame(self, deadline: float | None, room: int, what: str) -> bytearray:
         (size,) = struct.unpack(">I", self._read_exact(4, deadline))
-        if size > MAX_FRAME:
-            raise ProtocolError(f"frame of {size} bytes is over the limit")
+        if size > room:
+            raise ProtocolError(f"{what} of {size} bytes is over the limit")
         return self._read_exact(size, deadline)
 
-    def read_message(self, timeout: float | None = None) -> tuple[dict[str, Any], list[bytes]]:
-        """One message's header and blobs; raises on timeout, closed channel or malformed data."""
-        deadline = None if timeout is None else time.monotonic() + timeout
+    def read_message(self, timeout: float | None = None, deadline: float | None = None
+                     ) -> tuple[dict[str, Any], list[bytearray]]:
+        """One message's header and blobs; raises on timeout, closed channel, malformed or oversized data.
+
+        ``deadline`` (``time.monotonic()``) or ``timeout`` (seconds from now) bounds the whole message.
+        """
+        if deadline is None and timeout is not None:
+            deadline = time.monotonic() + timeout
+        raw = self._frame(deadline, min(MAX_HEADER_BYTES, self.max_message), "a message header")
+        if raw.count(b",") + raw.count(b"[") + raw.count(b"{") > MAX_HEADER_VALUES:
+            raise ProtocolError(f"a message header holds more than {MAX_HEADER_VALUES} values")
         try:
-            header = json.loads(self._frame(deadline).decode())
+            header = json.loads(raw.decode())
         except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
             raise ProtocolError("message header is not JSON") from None
         if type(header) is not dict or type(header.get("nblobs")) is not int or not 0 <= header["nblobs"] < MAX_BLOBS:
             raise ProtocolError("message header is malformed")
-        return header, [self._frame(deadline) for _ in range(header["nblobs"])]
+        room = self.max_message - len(raw) - 4
+        blobs = []
+        for _ in range(header["nblobs"]):
+            blobs.append(self._frame(deadline, room - 4, "a message"))
+            room -= 4 + len(blobs[-1])
+        return header, blobs
