@@ -502,6 +502,92 @@ def bc_multimodal(out_dir: Path) -> None:
     save(fig, out_dir, "bc_multimodal.png")
 
 
+def kl_estimators(out_dir: Path) -> None:
+    """The three one-sample KL estimators against the ratio rho = pi_ref(a|s) / pi_theta(a|s)."""
+    rho = np.linspace(0.05, 4.0, 400)
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot(rho, -np.log(rho), color=RED, lw=2, label=r"$k_1 = -\log\rho$ (unbiased, can be negative)")
+    ax.plot(rho, 0.5 * np.log(rho) ** 2, color=GREEN, lw=2, label=r"$k_2 = \frac{1}{2}(\log\rho)^2$ (biased, $\geq 0$)")
+    ax.plot(rho, rho - 1 - np.log(rho), color=BLUE, lw=2, label=r"$k_3 = \rho - 1 - \log\rho$ (unbiased, $\geq 0$)")
+    ax.axhline(0, color=GREY, lw=0.8)
+    ax.axvline(1, color=GREY, lw=0.8, ls=":")
+    ax.set_xlabel(r"$\rho = \pi_{\mathrm{ref}}(a\mid s)\,/\,\pi_\theta(a\mid s)$ of the sampled action")
+    ax.set_ylabel("one-sample estimate")
+    ax.set_ylim(-1.5, 3)
+    ax.legend(frameon=False, fontsize=8.5)
+    save(fig, out_dir, "kl_estimators.png")
+
+
+def token_batch(out_dir: Path) -> None:
+    """One row of hw5's batch: prompt, completion and padding, with mask, rewards and values."""
+    tokens = ["the", "cat", "sat", "on", "a", "mat", "<eos>", "<pad>", "<pad>"]
+    kind = ["prompt"] * 2 + ["completion"] * 5 + ["padding"] * 2
+    colours = {"prompt": "#eeeeee", "completion": "#e3eefb", "padding": "#fbeaea"}
+    rows = [
+        ("token $y_t$", tokens),
+        ("mask $m_t$", ["0", "0", "1", "1", "1", "1", "1", "0", "0"]),
+        ("reward $r_t$", ["0", "0"] + [r"$-\beta\ell_t$"] * 4 + [r"$-\beta\ell_t + R$", "0", "0"]),
+        ("value $V_t$", ["", ""] + [r"$V_%d$" % t for t in range(2, 7)] + ["", ""]),
+        ("in the loss", ["", ""] + ["yes"] * 5 + ["", ""]),
+    ]
+    fig, ax = plt.subplots(figsize=(10, 3.0))
+    for i, (label, cells) in enumerate(rows):
+        y = len(rows) - 1 - i
+        ax.text(-0.65, y, label, ha="right", va="center", fontsize=9.5)
+        for j, cell in enumerate(cells):
+            ax.add_patch(FancyBboxPatch((j - 0.45, y - 0.38), 0.9, 0.76, boxstyle="round,pad=0.02",
+                                        fc=colours[kind[j]], ec=GREY, lw=0.6))
+            ax.text(j, y, cell, ha="center", va="center", fontsize=9)
+    ax.text(0.5, len(rows) - 0.25, "prompt", ha="center", fontsize=9, color=GREY)
+    ax.text(4.0, len(rows) - 0.25, "completion (the policy's actions)", ha="center", fontsize=9, color=BLUE)
+    ax.text(7.5, len(rows) - 0.25, "padding", ha="center", fontsize=9, color=RED)
+    ax.set_xlim(-2.6, len(tokens) - 0.4)
+    ax.set_ylim(-0.6, len(rows) + 0.1)
+    ax.axis("off")
+    save(fig, out_dir, "token_batch.png")
+
+
+def dpo_start_states(out_dir: Path) -> None:
+    """One-step DPO with two start states of different value: same-start pairs recover pi*, mixed pairs do not."""
+    from scipy.optimize import minimize
+    from scipy.special import log_expit
+
+    beta = 1.0
+    reward = np.array([[2.0, 1.2, 0.4], [0.3, -0.2, -0.9]])  # start A is worth more than start B
+    ref = np.full((2, 3), 1.0 / 3)
+    pi_star = ref * np.exp(reward / beta)
+    pi_star /= pi_star.sum(axis=1, keepdims=True)
+
+    def fit(mixed: bool) -> np.ndarray:
+        items = [(s, a) for s in range(2) for a in range(3)]
+        pairs = [(i, j) for i in items for j in items if i != j and (mixed or i[0] == j[0])]
+
+        def loss(theta: np.ndarray) -> float:
+            logits = theta.reshape(2, 3)
+            g = beta * (logits - logsumexp(logits, axis=1, keepdims=True) - np.log(ref))
+            total = 0.0
+            for (s1, a1), (s2, a2) in pairs:
+                label = expit(reward[s1, a1] - reward[s2, a2])  # Bradley-Terry on the true rewards
+                margin = g[s1, a1] - g[s2, a2]
+                total -= ref[s1, a1] * ref[s2, a2] * (label * log_expit(margin) + (1 - label) * log_expit(-margin))
+            return total
+
+        theta = minimize(loss, np.zeros(6), method="BFGS").x.reshape(2, 3)
+        return np.exp(theta - logsumexp(theta, axis=1, keepdims=True))
+
+    fits = [("$\\pi^*$", pi_star, GREY), ("DPO, pairs share a start", fit(False), BLUE),
+            ("DPO, pairs mix the starts", fit(True), RED)]
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.3), sharey=True)
+    for ax, s, name in zip(axes, range(2), ("start A (high value)", "start B (low value)")):
+        for k, (label, pi, colour) in enumerate(fits):
+            ax.bar(np.arange(3) + (k - 1) * 0.27, pi[s], width=0.27, color=colour, label=label)
+        ax.set_xticks(range(3), [f"action {a + 1}\nr = {reward[s, a]:+.1f}" for a in range(3)], fontsize=8.5)
+        ax.set_title(name, fontsize=10)
+    axes[0].set_ylabel("probability")
+    axes[1].legend(frameon=False, fontsize=8.5)
+    save(fig, out_dir, "dpo_start_states.png")
+
+
 FIGURES = [
     compounding_error,
     bc_multimodal,
@@ -510,6 +596,9 @@ FIGURES = [
     christiano_loop,
     ppo_clip,
     gae_truncation,
+    kl_estimators,
+    token_batch,
+    dpo_start_states,
     gridworld_soft_vi,
     lottery_bias,
     feedback_spectrum,
