@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope bench site figures clean
+.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope formgrader bench site figures clean
 
 $(STAMP): pyproject.toml lectures/requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -46,6 +46,12 @@ datasets-check: setup
 gradescope: setup
 	@test -n "$(ID)" || { echo "usage: make gradescope ID=<assignment>"; exit 2; }
 	$(PY) -m autograder gradescope $(ID)
+
+## nbgrader's formgrader on this course, to grade written answers: http://127.0.0.1:8888/formgrader
+## (after python -m autograder nbgrader-sync; README, "Instructors: a term with this kit").
+formgrader: setup
+	PATH="$(abspath $(VENV))/bin:$$PATH" $(VENV)/bin/jupyter server --no-browser --ip=127.0.0.1 --port=8888 \
+		$$([ "$$(id -u)" = 0 ] && echo --allow-root)
 
 ## Every benchmark; each prints the table the README shows.
 bench: setup

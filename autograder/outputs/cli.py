@@ -1,0 +1,103 @@
+"""The instructor's term after ``batch``, as ``python -m autograder`` commands:
+
+  nbgrader-sync ID FOLDER --results DIR   record a batch in the nbgrader gradebook, notebooks placed for formgrader
+  feedback ID --results DIR [--html]      feedback.md (and nbgrader's HTML) with the hand-given scores and comments
+  export [--out CSV] [--long]             the course's final grades, one CSV (student x assignment)
+  regrade ID FOLDER --out DIR [--only N]  regrade after a suite fix; earlier results kept in DIR/_previous/
+  results-diff OLD NEW                    per submission, what changed between two result folders
+
+Each takes ``--course ROOT``, the nbgrader course (its ``nbgrader_config.py``, gradebook and
+``autograded/`` folder); the default is this repository.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _course(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--course", type=Path, default=None,
+                   help="the nbgrader course folder (default: this repository, whose nbgrader_config.py it reads)")
+
+
+def _cmd_sync(args: argparse.Namespace) -> int:
+    from autograder.outputs.gradebook import course_directory, sync
+
+    report = sync(args.assignment, args.folder, args.results, args.course)
+    print("\n".join(report.lines(args.assignment, course_directory(args.course).db_url)))
+    return 0
+
+
+def _cmd_feedback(args: argparse.Namespace) -> int:
+    from autograder.outputs.feedback import write_feedback
+
+    written = write_feedback(args.assignment, args.results, args.course, html=args.html)
+    print(f"wrote {len(written)} feedback.md file(s)" + (" and nbgrader's feedback HTML" if args.html else "")
+          + (f", e.g. {written[0]}" if written else ""))
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    import sys
+
+    from autograder.outputs.export import export
+
+    grades = export(args.out, args.course, long=args.long)
+    waiting = sum(g.waiting for g in grades)
+    print(f"wrote {args.out}: {len({g.student_id for g in grades})} student(s), "
+          f"{len({g.assignment for g in grades})} assignment(s)")
+    if waiting:
+        print(f"warning: {waiting} written answer(s) are not graded yet and count 0 (formgrader lists them)",
+              file=sys.stderr)
+    return 0
+
+
+def _cmd_regrade(args: argparse.Namespace) -> int:
+    from autograder.outputs.regrade import change_lines, regrade
+
+    done = regrade(args.assignment, args.folder, args.out, args.only or None, jobs=args.jobs, course_root=args.course)
+    print("\n".join(change_lines(done.changes, done.written)))
+    print(f"earlier results: {done.archive}" + ("; gradebook updated (hand-given scores and comments kept)"
+                                                if done.synced else "; not recorded in a gradebook yet"))
+    return 0
+
+
+def _cmd_diff(args: argparse.Namespace) -> int:
+    from autograder.outputs.batch_output import read_results
+    from autograder.outputs.regrade import change_lines, compare
+
+    print("\n".join(change_lines(compare(read_results(args.old), read_results(args.new)))))
+    return 0
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """Register this room's commands on ``python -m autograder``'s sub-parsers."""
+    p = sub.add_parser("nbgrader-sync", help="record a batch in the nbgrader gradebook for formgrader")
+    p.add_argument("assignment")
+    p.add_argument("folder", type=Path, help="the submissions folder the batch graded")
+    p.add_argument("--results", type=Path, required=True, help="the batch's --out folder")
+    _course(p)
+    p.set_defaults(fn=_cmd_sync)
+    p = sub.add_parser("feedback", help="feedback with the hand-given scores and comments")
+    p.add_argument("assignment")
+    p.add_argument("--results", type=Path, required=True, help="the batch's --out folder (synced)")
+    p.add_argument("--html", action="store_true", help="also run nbgrader generate_feedback")
+    _course(p)
+    p.set_defaults(fn=_cmd_feedback)
+    p = sub.add_parser("export", help="the course's final grades as one CSV")
+    p.add_argument("--out", type=Path, default=Path("grades.csv"))
+    p.add_argument("--long", action="store_true", help="one row per student and assignment")
+    _course(p)
+    p.set_defaults(fn=_cmd_export)
+    p = sub.add_parser("regrade", help="regrade a batch (or some of it), keeping the earlier results")
+    p.add_argument("assignment")
+    p.add_argument("folder", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="the batch's --out folder")
+    p.add_argument("--only", nargs="+", metavar="NAME", help="regrade only these submissions")
+    p.add_argument("--jobs", type=int, default=2)
+    _course(p)
+    p.set_defaults(fn=_cmd_regrade)
+    p = sub.add_parser("results-diff", help="what changed between two result folders")
+    p.add_argument("old", type=Path)
+    p.add_argument("new", type=Path)
+    p.set_defaults(fn=_cmd_diff)

@@ -1,0 +1,425 @@
+"""Record a batch in the course's nbgrader gradebook, so that formgrader grades the written answers.
+
+After ``python -m autograder batch ID FOLDER --out DIR``, :func:`sync` (``python -m autograder
+nbgrader-sync ID FOLDER --results DIR``) writes, through ``nbgrader.api.Gradebook`` only:
+
+- the assignment's structure: one notebook named after the assignment, a grade cell for each
+  stub (``cell_type`` code, worth the points its hidden tests carry) and for each written
+  answer (markdown, worth its nbgrader ``points``), each also a solution cell so a grader can
+  leave a comment on it;
+- per submission: the student (the submission's name; for a Gradescope export, each submitter
+  named in ``submission_metadata.yml``), the submission with its time when the layout records
+  one (nbgrader's ``timestamp.txt``, Gradescope's ``:created_at:``), the autograder's score of
+  each stub as the grade's ``auto_score`` and the tests' outcomes as its ``auto_comment``;
+  a written answer left as released (or a submission with no notebook) gets ``auto_score`` 0,
+  any other written answer waits for a person (``needs_manual_grade``);
+- the submitted notebook, placed at ``autograded/<student>/<assignment>/<assignment>.ipynb``
+  of the nbgrader course, where formgrader opens it (see :func:`formgrader_notebook`).
+
+Running it again updates the same rows (nbgrader's ``update_or_create_*`` and ``find_*``), never
+adds a second submission, and never writes ``manual_score``, ``extra_credit`` or
+``manual_comment``: what a person gave in formgrader stays as it was, and a grade a person set
+keeps ``needs_manual_grade`` as formgrader left it. A grader error (no score) changes nothing
+of its submission in the gradebook.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import nbformat
+
+from autograder import course
+from autograder.batch import Entry, discover, unique_safe_names
+from autograder.notebook import NotebookError, find_stubs, manual_cells, read_notebook, read_submission
+from autograder.outputs.batch_output import STUDENTS_NAME, read_results, read_students
+from autograder.report import atomic_write, markdown_text, plain
+from autograder.results import GRADED, GRADER_ERROR, GradeResult, GraderError
+
+GRADESCOPE_METADATA = "submission_metadata.yml"
+MISSING_CELL = "(No cell with this id was found in the submission; the answer may be elsewhere in the notebook.)"
+
+
+@dataclass
+class WrittenAnswer:
+    grade_id: str
+    points: float
+    released: str
+    """The cell's text in the student notebook ("YOUR ANSWER HERE"): an answer still equal to it is unanswered."""
+
+
+@dataclass
+class Submitter:
+    student_id: str
+    first_name: str | None = None
+    last_name: str | None = None
+    email: str | None = None
+
+
+@dataclass
+class SyncReport:
+    recorded: list[tuple[str, str]] = field(default_factory=list)
+    """``(submission, student)`` pairs written to the gradebook."""
+    placed: list[Path] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+    """``(submission, why)`` for each submission not recorded."""
+    kept: int = 0
+    """Scores and comments given by a person, left as they were."""
+    waiting: int = 0
+    """Written answers that wait for a person's grade."""
+
+    def lines(self, assignment: str, gradebook: str) -> list[str]:
+        out = [f"{assignment}: {len(self.recorded)} submission(s) recorded in {gradebook}, "
+               f"{len(self.placed)} notebook(s) placed for formgrader; {self.waiting} written answer(s) wait for a "
+               f"grade; {self.kept} score(s) or comment(s) given by a person kept as they were"]
+        out += [f"  not recorded: {name}: {why}" for name, why in self.skipped]
+        return out
+
+
+# ------------------------------------------------------------------ the nbgrader course
+
+def course_directory(root: Path | None = None):
+    """nbgrader's ``CourseDirectory`` for the course at ``root`` (default: this repository), read from its
+    ``nbgrader_config.py``, with the root and a relative SQLite ``db_url`` made absolute under ``root``
+    (the configuration names them relative to the folder nbgrader is started in)."""
+    from nbgrader.coursedir import CourseDirectory
+    from traitlets.config import Config
+    from traitlets.config.loader import PyFileConfigLoader
+
+    root = Path(root or course.REPO).resolve()
+    config = Config()
+    if (root / "nbgrader_config.py").is_file():
+        config = PyFileConfigLoader("nbgrader_config.py", path=str(root)).load_config()
+        config.CourseDirectory.pop("root", None)  # relative to the folder nbgrader starts in: set below
+    coursedir = CourseDirectory(config=config)
+    coursedir.root = str(root)
+    prefix = "sqlite:///"
+    if coursedir.db_url.startswith(prefix) and not coursedir.db_url.startswith(prefix + "/"):
+        database = root / coursedir.db_url[len(prefix):]
+        database.parent.mkdir(parents=True, exist_ok=True)
+        coursedir.db_url = prefix + str(database)
+    return coursedir
+
+
+def open_gradebook(coursedir):
+    """The course's ``nbgrader.api.Gradebook`` (a context manager that closes it)."""
+    from nbgrader.api import Gradebook
+
+    with_nbgrader_path()  # a new gradebook runs alembic
+    return Gradebook(coursedir.db_url, coursedir.course_id)
+
+
+def with_nbgrader_path() -> None:
+    """nbgrader runs ``alembic`` by name: put this environment's ``bin/`` first on ``PATH``."""
+    bin_dir = str(Path(sys.executable).parent)
+    if os.environ.get("PATH", "").split(os.pathsep)[0] != bin_dir:
+        os.environ["PATH"] = bin_dir + os.pathsep + os.environ.get("PATH", "")
+
+
+# ------------------------------------------------------------------ what the assignment holds
+
+def written_answers(assignment: str) -> list[WrittenAnswer]:
+    """The hand-graded answers of an assignment, from its student notebook, in order."""
+    nb = read_notebook(course.release_notebook(assignment))
+    released = {c.metadata.get("nbgrader", {}).get("grade_id"): c.source for c in nb.cells}
+    return [WrittenAnswer(gid, points, released.get(gid, "")) for gid, points in manual_cells(nb)]
+
+
+def stub_points(assignment: str, results: list[GradeResult]) -> dict[str, float]:
+    """Each stub's points, in notebook order, as the graded results carry them.
+
+    All results must come from one version of the suite: a stub worth different points in two
+    results means some were graded before the suite changed, and they must be regraded first.
+    """
+    seen: dict[str, tuple[float, str]] = {}
+    for result in results:
+        if result.status != GRADED:
+            continue
+        for stub in result.stubs:
+            if stub.name in seen and seen[stub.name][0] != stub.max_score:
+                points, other = seen[stub.name]
+                raise SystemExit(
+                    f"`{stub.name}` is worth {stub.max_score:g} point(s) in {result.submission}'s result and "
+                    f"{points:g} in {other}'s: these results come from different versions of {assignment}'s suite. "
+                    f"Regrade them all with the same suite first (python -m autograder regrade {assignment} ...).")
+            seen.setdefault(stub.name, (stub.max_score, result.submission))
+    return {name: seen[name][0] for name in [*course.stub_names(assignment), *seen] if name in seen}
+
+
+def register_assignment(gb, assignment: str, stubs: dict[str, float], written: list[WrittenAnswer]) -> None:
+    """The assignment, its notebook and its graded cells in the gradebook (its due date, if set, is kept)."""
+    gb.update_or_create_assignment(assignment)
+    gb.update_or_create_notebook(assignment, assignment)
+    for name, points in stubs.items():
+        gb.update_or_create_grade_cell(name, assignment, assignment, max_score=points, cell_type="code")
+        gb.update_or_create_solution_cell(name, assignment, assignment)
+    for answer in written:
+        gb.update_or_create_grade_cell(answer.grade_id, assignment, assignment, max_score=answer.points,
+                                       cell_type="markdown")
+        gb.update_or_create_solution_cell(answer.grade_id, assignment, assignment)
+
+
+# ------------------------------------------------------------------ who submitted, and when
+
+def gradescope_submitters(folder: Path) -> dict[str, tuple[list[Submitter], str | None]]:
+    """From a Gradescope export's ``submission_metadata.yml``: per submission folder, its submitters
+    (student id: the SID, else the e-mail, made path-safe) and its ``:created_at:`` time."""
+    import yaml
+
+    path = Path(folder) / GRADESCOPE_METADATA
+    if not path.is_file():
+        return {}
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise SystemExit(f"{path} cannot be read ({str(err)[:200]}); fix or remove it") from None
+    out = {}
+    for name, record in (data.items() if isinstance(data, dict) else []):
+        record = record if isinstance(record, dict) else {}
+        people = []
+        for person in record.get(":submitters") or []:
+            person = person if isinstance(person, dict) else {}
+            raw = str(person.get(":sid") or person.get(":email") or "").strip()
+            if raw:
+                full = str(person.get(":name") or "").strip()
+                first, _, last = full.rpartition(" ") if " " in full else ("", "", full)
+                people.append(Submitter(unique_safe_names([raw])[0], first or None, last or None,
+                                        str(person.get(":email") or "") or None))
+        created = record.get(":created_at")
+        out[str(name)] = (people, str(created) if created else None)
+    return out
+
+
+def nbgrader_timestamp(entry: Entry, folder: Path) -> str | None:
+    """The ``timestamp.txt`` nbgrader's ``collect`` writes beside a submitted notebook, if any."""
+    if entry.notebook is None:
+        return None
+    for place in (entry.notebook.parent, Path(folder) / entry.name):
+        stamp = place / "timestamp.txt"
+        if stamp.is_file() and not stamp.is_symlink() and stamp.stat().st_size < 200:
+            return stamp.read_text(encoding="utf-8", errors="replace").strip() or None
+    return None
+
+
+# ------------------------------------------------------------------ the notebook formgrader shows
+
+def _inert(markdown: str) -> str:
+    """Student Markdown that formgrader renders as text: no raw HTML (a script would run in the grader's
+    browser, with the grader's Jupyter session). Math and Markdown are unaffected; ``<`` shows as ``<``."""
+    return markdown.replace("<", "&lt;")
+
+
+def _graded(grade_id: str, points: float) -> dict:
+    return {"grade": True, "solution": True, "locked": False, "points": points, "grade_id": grade_id,
+            "schema_version": 3}
+
+
+def formgrader_notebook(path: Path, result: GradeResult, stubs: dict[str, float],
+                        written: list[WrittenAnswer]) -> tuple[nbformat.NotebookNode, dict[str, str]]:
+    """The submitted notebook as formgrader should show it, and each written answer's state.
+
+    Every cell keeps its source; outputs and all metadata but tags are dropped (the grader did not
+    run them, and they are the student's HTML); Markdown and raw cells are shown as text. The
+    cell the grader graded for each stub (matched as ``find_stubs`` matches it) and the cell of
+    each written answer (by ``grade_id``, the last one if several) carry nbgrader metadata, so
+    formgrader shows a score box there; one that is missing is added at the end, saying so.
+    A first cell lists the grader's notes on the submission. States: ``answered``,
+    ``unanswered`` (as released, or empty) or ``missing``.
+    """
+    nb, _ = read_submission(path)
+    matched, _ = find_stubs(nb, list(stubs))
+    stub_cell = {}
+    written_cell = {}
+    ids = {a.grade_id for a in written}
+    for index, cell in enumerate(nb.cells):
+        meta = cell.get("metadata", {}).get("nbgrader")
+        gid = meta.get("grade_id") if isinstance(meta, dict) else None
+        if cell.cell_type == "code":
+            for name, match in matched.items():
+                if cell.source == match.source:
+                    stub_cell[name] = index
+        elif cell.cell_type == "markdown" and gid in ids:
+            written_cell[gid] = index
+    cells = []
+    notes = [markdown_text(n) for n in result.notes]
+    cells.append(nbformat.v4.new_markdown_cell(
+        f"**Automatic score: {result.score:g} / {result.max_score:g}** (the stubs' scores below come from "
+        "the hidden tests; the written answers wait for yours)" + "".join(f"\n- note: {n}" for n in notes)))
+    where = {index: ("code", name) for name, index in stub_cell.items()}
+    where.update({index: ("markdown", gid) for gid, index in written_cell.items()})
+    points = {**stubs, **{a.grade_id: a.points for a in written}}
+    for index, cell in enumerate(nb.cells):
+        source = cell.get("source", "")
+        tags = cell.get("metadata", {}).get("tags", [])
+        if cell.cell_type == "code":
+            new = nbformat.v4.new_code_cell(source)
+        else:
+            new = nbformat.v4.new_markdown_cell(_inert(source))
+            if cell.cell_type == "markdown" and isinstance(cell.get("attachments"), dict):
+                new.attachments = cell.attachments
+        if isinstance(tags, list) and all(isinstance(t, str) for t in tags) and tags:
+            new.metadata["tags"] = tags
+        if index in where:
+            new.metadata["nbgrader"] = _graded(where[index][1], points[where[index][1]])
+        cells.append(new)
+    for name in stubs:
+        if name not in stub_cell:
+            cell = nbformat.v4.new_code_cell(f"# No cell defining `{name}` was found in the submission.")
+            cell.metadata["nbgrader"] = _graded(name, stubs[name])
+            cells.append(cell)
+    states = {}
+    for answer in written:
+        if answer.grade_id not in written_cell:
+            cell = nbformat.v4.new_markdown_cell(MISSING_CELL)
+            cell.metadata["nbgrader"] = _graded(answer.grade_id, answer.points)
+            cells.append(cell)
+            states[answer.grade_id] = "missing"
+            continue
+        text = nb.cells[written_cell[answer.grade_id]].source.strip()
+        states[answer.grade_id] = "unanswered" if text in ("", answer.released.strip()) else "answered"
+    out = nbformat.v4.new_notebook(cells=cells)
+    for key in ("kernelspec", "language_info"):
+        if isinstance(nb.metadata.get(key), dict):
+            out.metadata[key] = nb.metadata[key]
+    return out, states
+
+
+def _tests_comment(result: GradeResult, name: str) -> str:
+    """The hidden tests' outcomes for one stub, as the grade's automatic comment."""
+    if result.status != GRADED:
+        return f"Not graded automatically: {plain(result.error or 'no notebook')}"
+    stub = next((s for s in result.stubs if s.name == name), None)
+    if stub is None:
+        return "No tests of this stub ran."
+    lines = []
+    for test in stub.tests:
+        if test.passed:
+            lines.append(f"✓ {plain(test.name)} ({test.points:g}/{test.points:g})")
+        else:
+            lines.append(f"✗ {plain(test.name)} (0/{test.points:g}): {plain(test.message)}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ writing grades
+
+def _rows(gb, assignment: str, student: str, timestamp: str | None):
+    """The submission's notebook and its grade and comment rows, creating what is missing (a cell added to
+    the assignment after the submission was first recorded gets its row here)."""
+    from nbgrader import api
+
+    try:
+        submission = gb.find_submission(assignment, student)
+        if timestamp is not None:
+            gb.update_or_create_submission(assignment, student, timestamp=timestamp)
+    except api.MissingEntry:
+        with warnings.catch_warnings():  # nbgrader's add_submission builds rows before adding them: SAWarnings
+            warnings.simplefilter("ignore")
+            submission = gb.add_submission(assignment, student, **({"timestamp": timestamp} if timestamp else {}))
+    notebook = gb.find_notebook(assignment, assignment)
+    submitted = next((n for n in submission.notebooks if n.notebook_id == notebook.id), None)
+    if submitted is None:
+        submitted = api.SubmittedNotebook(notebook=notebook, assignment=submission)
+        gb.db.add(submitted)
+    grades = {g.cell_id: g for g in submitted.grades}
+    comments = {c.cell_id: c for c in submitted.comments}
+    for cell in notebook.grade_cells:
+        if cell.id not in grades:
+            grades[cell.id] = api.Grade(cell_id=cell.id, notebook=submitted)
+            gb.db.add(grades[cell.id])
+    for cell in notebook.solution_cells:
+        if cell.id not in comments:
+            comments[cell.id] = api.Comment(cell_id=cell.id, notebook=submitted)
+            gb.db.add(comments[cell.id])
+    gb.db.flush()
+    by_name_grade = {cell.name: grades[cell.id] for cell in notebook.grade_cells}
+    by_name_comment = {cell.name: comments[cell.id] for cell in notebook.solution_cells}
+    return by_name_grade, by_name_comment
+
+
+def record_submission(gb, assignment: str, student: str, result: GradeResult, stubs: dict[str, float],
+                      states: dict[str, str], timestamp: str | None, report: SyncReport) -> None:
+    """One student's submission: automatic scores and comments in, a person's scores and comments untouched."""
+    grades, comments = _rows(gb, assignment, student, timestamp)
+    scores = {s.name: s.score for s in result.stubs} if result.status == GRADED else {}
+    for name in stubs:
+        grade, comment = grades[name], comments[name]
+        grade.auto_score = float(scores.get(name, 0.0))
+        comment.auto_comment = _tests_comment(result, name)
+        if grade.manual_score is None:
+            grade.needs_manual_grade = False
+    for gid, state in states.items():
+        grade = grades[gid]
+        if grade.manual_score is not None:
+            continue  # graded by a person: theirs to change
+        unanswered = state == "unanswered" or result.status != GRADED
+        grade.auto_score = 0.0 if unanswered else None
+        grade.needs_manual_grade = not unanswered
+        report.waiting += not unanswered
+    report.kept += sum(g.manual_score is not None or g.extra_credit is not None for g in grades.values())
+    report.kept += sum(c.manual_comment is not None for c in comments.values())
+    gb.db.commit()
+
+
+def _submitters(entries: list[Entry], folder: Path) -> dict[str, tuple[list[Submitter], str | None]]:
+    gradescope = gradescope_submitters(folder)
+    out = {}
+    for entry in entries:
+        people, created = gradescope.get(entry.name, ([], None))
+        out[entry.name] = (people or [Submitter(entry.name)], created or nbgrader_timestamp(entry, folder))
+    return out
+
+
+def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | None = None) -> SyncReport:
+    """Record the batch in ``results_dir`` (graded from ``folder``) in the gradebook of the nbgrader course at
+    ``course_root`` (default: this repository), and place each notebook for formgrader. See the module."""
+    course.check_assignment(assignment)
+    with_nbgrader_path()
+    folder, results_dir = Path(folder), Path(results_dir)
+    results = read_results(results_dir)
+    entries = {e.name: e for e in discover(folder, assignment, course.stub_names(assignment))}
+    stubs = stub_points(assignment, list(results.values()))
+    written = written_answers(assignment)
+    coursedir = course_directory(course_root)
+    people = _submitters(list(entries.values()), folder)
+    report = SyncReport()
+    students: dict[str, list[str]] = {}
+    with open_gradebook(coursedir) as gb:
+        register_assignment(gb, assignment, stubs, written)
+        for name in sorted(set(results) | set(entries)):
+            result, entry = results.get(name), entries.get(name)
+            if result is None:
+                report.skipped.append((name, "not graded yet (run the batch again)"))
+                continue
+            if entry is None:
+                report.skipped.append((name, f"graded, but no longer in {folder}"))
+                continue
+            if result.status == GRADER_ERROR:
+                report.skipped.append((name, "the grader failed on it; run the batch again, then sync"))
+                continue
+            notebook, states = None, {a.grade_id: "unanswered" for a in written}
+            if result.status == GRADED and entry.notebook is not None:
+                try:
+                    notebook, states = formgrader_notebook(entry.notebook, result, stubs, written)
+                except (NotebookError, GraderError, OSError) as err:
+                    report.skipped.append((name, f"its notebook cannot be read any more: {plain(str(err))}"))
+                    continue
+            submitters, timestamp = people[name]
+            for person in submitters:
+                gb.update_or_create_student(person.student_id, **{k: v for k, v in (
+                    ("first_name", person.first_name), ("last_name", person.last_name), ("email", person.email))
+                    if v is not None})
+                record_submission(gb, assignment, person.student_id, result, stubs, states, timestamp, report)
+                report.recorded.append((name, person.student_id))
+                if notebook is not None:
+                    place = Path(coursedir.format_path(coursedir.autograded_directory, person.student_id,
+                                                       assignment)) / f"{assignment}.ipynb"
+                    atomic_write(place, nbformat.writes(notebook))
+                    report.placed.append(place)
+            students[name] = [p.student_id for p in submitters]
+    atomic_write(results_dir / STUDENTS_NAME, json.dumps({**read_students(results_dir), **students}, indent=1,
+                                                         sort_keys=True))
+    return report

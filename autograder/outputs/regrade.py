@@ -1,0 +1,164 @@
+"""Regrade after a suite is fixed mid-term, and show per student what changed.
+
+``python -m autograder regrade ID FOLDER --out DIR [--only NAME ...]`` regrades the submissions
+of a batch already graded into ``DIR`` (all of them, or the named few):
+
+1. it copies their current results (``result.json``, ``results.json``, ``feedback.md``) and the
+   batch's ``gradebook.csv`` into ``DIR/_previous/<UTC time>/``, where they stay readable;
+2. it removes each one's ``result.json`` (the mark ``batch`` reads as "graded") and runs the
+   batch again, which grades exactly those and rewrites ``gradebook.csv`` for all;
+3. when ``DIR`` was recorded in the course's gradebook before, it records it again: the
+   automatic scores change, the scores and comments people gave in formgrader stay;
+4. it prints, per submission, the automatic score before and after, the stubs that changed,
+   the hand-given written score (unchanged) and the total before and after.
+
+``python -m autograder results-diff OLD NEW`` prints the same comparison for any two result
+folders (``DIR/_previous/<time>`` and ``DIR``, say).
+"""
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+from autograder import course
+from autograder.batch import GRADEBOOK_NAME, discover, run_batch
+from autograder.outputs.batch_output import PREVIOUS_DIR, read_results, read_students
+from autograder.report import RESULT_NAME
+from autograder.results import GradeResult
+
+
+@dataclass
+class Change:
+    submission: str
+    before: float | None
+    """The automatic score before (None: no score, a grader error or not graded)."""
+    after: float | None
+    stubs: list[tuple[str, float | None, float | None]] = field(default_factory=list)
+    """``(stub, before, after)`` for each stub whose score changed."""
+    status: tuple[str, str] | None = None
+    """``(before, after)`` when the result's status changed (graded, ungradable, grader_error)."""
+
+    @property
+    def changed(self) -> bool:
+        return self.before != self.after or bool(self.stubs) or self.status is not None
+
+
+def _score(result: GradeResult | None) -> float | None:
+    return result.score if result is not None and result.has_score else None
+
+
+def compare(before: dict[str, GradeResult], after: dict[str, GradeResult],
+            names: list[str] | None = None) -> list[Change]:
+    """Per submission (those named, else every one in either), what changed between two sets of results."""
+    changes = []
+    for name in names if names is not None else sorted(set(before) | set(after)):
+        old, new = before.get(name), after.get(name)
+        old_stubs = {s.name: s.score for s in old.stubs} if old is not None and old.has_score else {}
+        new_stubs = {s.name: s.score for s in new.stubs} if new is not None and new.has_score else {}
+        stubs = [(s, old_stubs.get(s), new_stubs.get(s)) for s in dict.fromkeys([*old_stubs, *new_stubs])
+                 if old_stubs.get(s) != new_stubs.get(s)]
+        statuses = (old.status if old else "none", new.status if new else "none")
+        changes.append(Change(name, _score(old), _score(new), stubs,
+                              statuses if statuses[0] != statuses[1] else None))
+    return changes
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{round(value, 6):g}"
+
+
+def change_lines(changes: list[Change], written: dict[str, float | None] | None = None) -> list[str]:
+    """A table, one line per submission: automatic before → after, the stubs that changed and, when
+    ``written`` (the hand-given written score per submission) is known, it and the totals."""
+    lines = []
+    width = max([len(c.submission) for c in changes] + [10])
+    head = f"{'submission':<{width}}  automatic"
+    if written is not None:
+        head += "        written (by hand, kept)  total"
+    lines.append(head + "        what changed")
+    for c in changes:
+        auto = f"{_fmt(c.before)} → {_fmt(c.after)}" if c.before != c.after else f"{_fmt(c.after)} (same)"
+        line = f"{c.submission:<{width}}  {auto:<15}"
+        if written is not None:
+            hand = written.get(c.submission)
+            total = ("-" if hand is None or c.after is None or c.before is None else
+                     f"{_fmt(c.before + hand)} → {_fmt(c.after + hand)}")
+            line += f"  {_fmt(hand):<23}  {total:<15}"
+        what = [f"{s} {_fmt(a)} → {_fmt(b)}" for s, a, b in c.stubs]
+        if c.status:
+            what.insert(0, f"{c.status[0]} → {c.status[1]}")
+        lines.append((line + "  " + ("; ".join(what) or "nothing")).rstrip())
+    changed = sum(c.changed for c in changes)
+    lines.append(f"{changed} of {len(changes)} submission(s) changed")
+    return lines
+
+
+def archive(out_dir: Path, names: list[str]) -> Path:
+    """Copy the named submissions' results and the batch's gradebook into ``out_dir/_previous/<UTC time>/``."""
+    out_dir = Path(out_dir)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    dest, n = out_dir / PREVIOUS_DIR / stamp, 2
+    while dest.exists():
+        dest, n = out_dir / PREVIOUS_DIR / f"{stamp}-{n}", n + 1
+    dest.mkdir(parents=True)
+    for name in names:
+        if (out_dir / name).is_dir():
+            shutil.copytree(out_dir / name, dest / name, symlinks=True)
+    if (out_dir / GRADEBOOK_NAME).is_file():
+        shutil.copy2(out_dir / GRADEBOOK_NAME, dest / GRADEBOOK_NAME)
+    return dest
+
+
+def written_scores(assignment: str, out_dir: Path, course_root: Path | None) -> dict[str, float | None]:
+    """Per submission, the written score in the gradebook (hand-given; None where no submission is recorded).
+    A submission of several students (a Gradescope group) shows its first student's."""
+    from nbgrader.api import MissingEntry
+
+    from autograder.outputs.gradebook import course_directory, open_gradebook
+
+    out = {}
+    with open_gradebook(course_directory(course_root)) as gb:
+        for name, students in read_students(out_dir).items():
+            try:
+                submitted = gb.find_submission_notebook(assignment, assignment, students[0])
+            except (MissingEntry, IndexError):
+                out[name] = None
+                continue
+            out[name] = sum(g.score for g in submitted.grades if g.cell_type != "code")
+    return out
+
+
+@dataclass
+class Regrade:
+    archive: Path
+    changes: list[Change]
+    synced: bool
+    written: dict[str, float | None] | None
+
+
+def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None = None, jobs: int = 2,
+            course_root: Path | None = None, progress: bool = True) -> Regrade:
+    """Regrade ``out_dir``'s submissions of ``folder`` (or those in ``only``); see the module."""
+    from autograder.outputs.gradebook import sync
+
+    course.check_assignment(assignment)
+    out_dir = Path(out_dir)
+    entries = [e.name for e in discover(folder, assignment, course.stub_names(assignment))]
+    names = entries if not only else list(dict.fromkeys(only))
+    unknown = [n for n in names if n not in entries]
+    if unknown:
+        raise SystemExit(f"not a submission of {folder}: {', '.join(unknown)} (submissions: {', '.join(entries)})")
+    before = read_results(out_dir) if out_dir.is_dir() else {}
+    kept = archive(out_dir, [n for n in names if n in before])
+    for name in names:
+        (out_dir / name / RESULT_NAME).unlink(missing_ok=True)
+    run_batch(assignment, folder, out_dir, jobs=jobs, progress=progress)
+    changes = compare(before, read_results(out_dir), names)
+    synced = bool(read_students(out_dir))
+    written = None
+    if synced:
+        sync(assignment, folder, out_dir, course_root)
+        written = written_scores(assignment, out_dir, course_root)
+    return Regrade(kept, changes, synced, written)
