@@ -48,6 +48,15 @@ def test_every_citation_is_current():
     assert not stale, "\n".join(stale)
 
 
+def test_formulas_in_lecture_math_cite_labels_that_exist():
+    import re
+
+    cited = set(re.findall(r"\[(eq-[a-z0-9-]+)\]", (Path(__file__).parent / "lecture_math.py").read_text()))
+    assert cited, "lecture_math.py cites no equation label"
+    missing = sorted(cited - set(ll.equations()))
+    assert not missing, f"lecture_math.py cites labels no lecture defines: {missing}"
+
+
 # ---------------------------------------------------------------------------
 # the parser and the decorator on synthetic pages
 # ---------------------------------------------------------------------------
