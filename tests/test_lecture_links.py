@@ -7,6 +7,7 @@ link itself: the parser, and the coverage of every chapter, new ones included.
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -49,8 +50,6 @@ def test_every_citation_is_current():
 
 
 def test_formulas_in_lecture_math_cite_labels_that_exist():
-    import re
-
     cited = set(re.findall(r"\[(eq-[a-z0-9-]+)\]", (Path(__file__).parent / "lecture_math.py").read_text()))
     assert cited, "lecture_math.py cites no equation label"
     missing = sorted(cited - set(ll.equations()))
