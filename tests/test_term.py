@@ -20,6 +20,7 @@ from pathlib import Path
 
 import nbformat
 import pytest
+from nbconvert.filters.markdown import markdown2html
 
 from autograder.outputs import export, feedback, gradebook, regrade
 from autograder.outputs.batch_output import PREVIOUS_DIR, read_results, read_students
@@ -127,7 +128,8 @@ def test_sync_records_automatic_scores_and_keeps_what_people_gave(term):
         assert len(gb.assignment_submissions("fx")) == 3 and len(gb.students) == 3
         assert gb.find_comment("q_why", "fx", "fx", "bob").manual_comment.startswith("Half of it")
         assert "mean_of is right (1/1)" in gb.find_comment("mean_of", "fx", "fx", "bob").auto_comment
-        assert "Counter <b>is</b> off" in gb.find_comment("Counter", "fx", "fx", "bob").auto_comment
+        shown = markdown2html(gb.find_comment("Counter", "fx", "fx", "bob").auto_comment)  # as nbgrader's feedback HTML
+        assert "Counter &lt;b&gt;is&lt;/b&gt; off" in shown and "<b>" not in shown
         assert gb.find_submission("fx", "bob").score == 3 + 1 + 1 + 1.5
     assert json.loads((out / "_students.json").read_text()) == {"alice": ["alice"], "bob": ["bob"], "carol": ["carol"]}
 
@@ -149,11 +151,26 @@ def test_the_placed_notebook_shows_the_graded_cells_and_no_student_html(term):
     assert graded_cells["q_why"].source == gradebook.MISSING_CELL  # no cell carries q_why's id any more
     assert all(c.metadata["nbgrader"]["grade"] and c.metadata["nbgrader"]["solution"] for c in graded_cells.values())
     text = "".join(c.source for c in placed.cells if c.cell_type == "markdown")
-    assert "<script" not in text and "<img" not in text and "&lt;img" in text
+    assert "<script" not in text and "<img" not in text and "&lt;img" in text and "$a<b$" in text  # math as written
     assert not any(c.get("outputs") for c in placed.cells if c.cell_type == "code")
     assert set(placed.metadata) <= {"kernelspec", "language_info"}
     assert placed.cells[0].source.startswith("**Automatic score: 7 / 7**")
     assert grades_of(root, "alice")["q_why"] == (None, None, True), "a missing answer cell waits for a person"
+
+
+@pytest.mark.parametrize("answer, shown", [
+    ("<script>steal()</script> since $a<b$ and $$c<d$$", "since $a&lt;b$ and $$c&lt;d$$"),  # math as MathJax reads it
+    ("[my plot](javascript:steal()) and [more]( jav&#x61;script:steal())", "[my plot](javascript:steal())"),
+    ("[r]: javascript:steal()\n\nsee [r]", "[r]: javascript:steal()"),
+    ("[notes](https://example.org/n) and ![fig](figure.png)", '<a href="https://example.org/n">notes</a>'),
+    ("\\$<img src=x onerror=steal()>$", "&lt;img src=x onerror=steal()&gt;"),  # not math: every < escaped
+    ("`a$` <img src=x onerror=steal()> `$b`", "&lt;img src=x onerror=steal()&gt;"),
+])
+def test_student_markdown_renders_inert_in_formgrader(answer, shown):
+    rendered = markdown2html(gradebook._inert(answer))  # the filter formgrader's template applies
+    assert shown in rendered
+    assert "<script" not in rendered and "onerror=" not in rendered.replace("&lt;img src=x onerror=", "")
+    assert 'href="javascript' not in rendered.replace(" ", "")
 
 
 def test_a_gradescope_export_records_each_submitter_and_knows_who_was_late(fixture_course, tmp_path, new_course):

@@ -24,11 +24,14 @@ of its submission in the gradebook.
 """
 from __future__ import annotations
 
+import html
 import json
 import os
+import re
 import sys
 import warnings
 from dataclasses import dataclass, field
+from html.parser import HTMLParser
 from pathlib import Path
 
 import nbformat
@@ -207,10 +210,71 @@ def nbgrader_timestamp(entry: Entry, folder: Path) -> str | None:
 
 # ------------------------------------------------------------------ the notebook formgrader shows
 
+_LINK_TARGET = re.compile(r"\]\(\s*([^)\s]*)")
+_REFERENCE = re.compile(r"(?m)^( {0,3})(\[[^\]\n]+\]:[ \t]*)(\S*)")
+_MATH = re.compile(r"(\$\$.+?\$\$|\$[^$\n]+\$)", re.S)
+_SAFE_SCHEMES = {"http", "https", "mailto"}
+_SHOWN_TAGS = {"p", "a", "em", "strong", "del", "code", "pre", "ul", "ol", "li", "blockquote", "hr", "br", "img",
+               "h1", "h2", "h3", "h4", "h5", "h6", "table", "thead", "tbody", "tr", "th", "td"}
+_SHOWN_ATTRIBUTES = {"href", "src", "alt", "title", "id", "class", "align", "style", "start"}
+
+
+def _harmless_url(url: str) -> bool:
+    """A link target with no scheme, or http(s) or mailto, read as a browser reads it (entities decoded,
+    tabs and line breaks dropped): never ``javascript:`` and the like."""
+    decoded = re.sub(r"[\x00-\x20\x7f]", "", html.unescape(url))
+    scheme = re.match(r"([A-Za-z][A-Za-z0-9+.-]*):", decoded)
+    return scheme is None or scheme.group(1).lower() in _SAFE_SCHEMES
+
+
+def _no_scheme_links(text: str) -> str:
+    """Links (inline and reference) whose target has a scheme other than http(s) or mailto, shown as text."""
+    text = _LINK_TARGET.sub(lambda m: m.group(0) if _harmless_url(m.group(1)) else "]\\(" + m.group(0)[2:], text)
+    return _REFERENCE.sub(lambda m: m.group(0) if _harmless_url(m.group(3)) else f"{m.group(1)}\\{m.group(2)}{m.group(3)}",
+                          text)
+
+
+class _Elements(HTMLParser):
+    """Whether HTML holds only the elements Markdown makes, with harmless links."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.inert = True
+
+    def handle_starttag(self, tag, attrs):
+        for name, value in attrs:
+            if name not in _SHOWN_ATTRIBUTES or (name in ("href", "src") and not _harmless_url(value or "")) \
+                    or (name == "style" and value and not re.fullmatch(r"text-align:\s*\w+;?", value)):
+                self.inert = False
+        self.inert &= tag in _SHOWN_TAGS
+
+    handle_startendtag = handle_starttag
+
+
+def _renders_inert(markdown: str) -> bool:
+    """Whether nbconvert's Markdown renderer (the one formgrader's and nbgrader's feedback templates use)
+    makes only Markdown's own elements of this text."""
+    from nbconvert.filters.markdown import markdown2html
+
+    elements = _Elements()
+    elements.feed(markdown2html(markdown))
+    elements.close()
+    return elements.inert
+
+
 def _inert(markdown: str) -> str:
-    """Student Markdown that formgrader renders as text: no raw HTML (a script would run in the grader's
-    browser, with the grader's Jupyter session). Math and Markdown are unaffected; ``<`` shows as ``<``."""
-    return markdown.replace("<", "&lt;")
+    """Student Markdown that formgrader (and nbgrader's feedback HTML) renders as text where it could act.
+
+    nbconvert passes raw HTML and any link scheme through: a script, an event handler or a
+    ``javascript:`` link would run in the grader's browser with the grader's Jupyter session. Outside
+    math, ``<`` is written ``&lt;`` (it shows as ``<``; nbconvert escapes math itself), and a link
+    with another scheme is shown as its text. The result is rendered as formgrader renders it and
+    checked to hold only Markdown's own elements; if it does not (math delimiters that the renderer
+    reads otherwise than the split here), every ``<`` is escaped, math included.
+    """
+    parts = _MATH.split(markdown)
+    candidate = _no_scheme_links("".join(p if i % 2 else p.replace("<", "&lt;") for i, p in enumerate(parts)))
+    return candidate if _renders_inert(candidate) else _no_scheme_links(markdown.replace("<", "&lt;"))
 
 
 def _graded(grade_id: str, points: float) -> dict:
@@ -291,17 +355,21 @@ def formgrader_notebook(path: Path, result: GradeResult, stubs: dict[str, float]
 def _tests_comment(result: GradeResult, name: str) -> str:
     """The hidden tests' outcomes for one stub, as the grade's automatic comment."""
     if result.status != GRADED:
-        return f"Not graded automatically: {plain(result.error or 'no notebook')}"
+        return f"Not graded automatically: {_inert(_line(result.error or 'no notebook'))}"
     stub = next((s for s in result.stubs if s.name == name), None)
     if stub is None:
         return "No tests of this stub ran."
-    lines = []
+    lines = []  # Markdown: nbgrader's feedback HTML renders comments, and messages quote student text
     for test in stub.tests:
         if test.passed:
-            lines.append(f"✓ {plain(test.name)} ({test.points:g}/{test.points:g})")
+            lines.append(f"- ✓ {_inert(_line(test.name))} ({test.points:g}/{test.points:g})")
         else:
-            lines.append(f"✗ {plain(test.name)} (0/{test.points:g}): {plain(test.message)}")
+            lines.append(f"- ✗ {_inert(_line(test.name))} (0/{test.points:g}): {_inert(_line(test.message))}")
     return "\n".join(lines)
+
+
+def _line(text: str) -> str:
+    return plain(text).replace("\n", " ")
 
 
 # ------------------------------------------------------------------ writing grades
