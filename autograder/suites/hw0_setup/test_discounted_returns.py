@@ -15,10 +15,13 @@ def test_random_batch_matches_reference(student, reference, rng):
 
 @stub("discounted_returns", points=1, hint="Discount the future, not the past: the last step's return is its reward.")
 def test_last_step_is_its_reward(student, rng):
-    """The return-to-go at the final step is the final reward alone"""
+    """The return-to-go at the final step is the final reward alone, the step before adds gamma times it"""
     rewards = rng.normal(size=(3, 6))
     got = student.discounted_returns(rewards, 0.7)
-    check_array(got[:, -1] if isinstance(got, np.ndarray) and got.shape == (3, 6) else got, rewards[:, -1])
+    check_array(got[:, -1] if isinstance(got, np.ndarray) and got.shape == (3, 6) else got, rewards[:, -1],
+                name="the returns at the final step")
+    check_array(got[:, -2], rewards[:, -2] + 0.7 * rewards[:, -1],
+                name="the returns at the step before the last (r_{T-2} + gamma * r_{T-1})")
 
 
 @stub("discounted_returns", points=1, hint="Each episode (row) is independent: never sum across rows.")
