@@ -161,14 +161,15 @@ def walk_notebooks(folder: str | Path) -> tuple[list[Path], list[str]]:
 # ------------------------------------------------------------------ parsing, in a child process
 
 
-def read_code_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES) -> tuple[SubmittedNotebook, list[str]]:
+def read_code_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES, memory: int = PARSE_MEMORY_BYTES
+                    ) -> tuple[SubmittedNotebook, list[str]]:
     """The code cells of the submitted notebook at ``path`` and notes about it, read within a budget.
 
     Raises :class:`NotebookError` for anything that is the submission's problem (not a regular file,
     too big, not a notebook, too costly to read); an error of the analysis itself is the grader's
     (:class:`~autograder.results.GraderError`).
     """
-    data = _in_child(path, cap, "cells")
+    data = _in_child(path, cap, "cells", memory)
     cells = []
     for raw in data["cells"]:
         cells.append(CodeCell(str(raw["source"]), raw["grade_id"] if isinstance(raw["grade_id"], str) else None,
@@ -176,22 +177,23 @@ def read_code_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES) -> tuple[Su
     return SubmittedNotebook(cells), [str(n) for n in data["notes"]]
 
 
-def read_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES) -> tuple[list[dict[str, Any]], list[str]]:
+def read_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES, memory: int = PARSE_MEMORY_BYTES
+               ) -> tuple[list[dict[str, Any]], list[str]]:
     """Every cell of the submitted notebook at ``path`` as plain data, read in the child; and notes.
 
     Each cell is ``{"cell_type", "source", "metadata": {"tags", "nbgrader"}}`` (and ``"attachments"`` for
     Markdown), with no outputs: what an output that shows the submission (the nbgrader gradebook) needs.
     """
-    data = _in_child(path, cap, "all")
+    data = _in_child(path, cap, "all", memory)
     return list(data["cells"]), [str(n) for n in data["notes"]]
 
 
-def _in_child(path: str | Path, cap: int, mode: str) -> dict[str, Any]:
+def _in_child(path: str | Path, cap: int, mode: str, memory: int) -> dict[str, Any]:
     from autograder.results import GraderError
 
     fd = open_regular(path, cap)
     try:
-        done = subprocess.run([sys.executable, "-m", "autograder.intake", mode, str(cap)], stdin=fd,
+        done = subprocess.run([sys.executable, "-m", "autograder.intake", mode, str(cap), str(memory)], stdin=fd,
                               capture_output=True, timeout=PARSE_WALL_SECONDS, cwd="/")
     except subprocess.TimeoutExpired:
         raise NotebookError(f"reading the notebook took over {PARSE_WALL_SECONDS:.0f} s; it was not graded") from None
@@ -199,7 +201,7 @@ def _in_child(path: str | Path, cap: int, mode: str) -> dict[str, Any]:
         os.close(fd)
     if done.returncode != 0:
         raise NotebookError("reading the notebook exceeded the grader's budget for it "
-                            f"({_size(PARSE_MEMORY_BYTES)} of memory, {PARSE_CPU_SECONDS} s of CPU): "
+                            f"({_size(memory)} of memory, {PARSE_CPU_SECONDS} s of CPU): "
                             "it is not a notebook Jupyter saves")
     try:
         data = json.loads(done.stdout.decode("utf-8", "surrogatepass"))
@@ -212,8 +214,8 @@ def _in_child(path: str | Path, cap: int, mode: str) -> dict[str, Any]:
     return data
 
 
-def _limit_self() -> None:
-    for which, value in ((resource.RLIMIT_AS, PARSE_MEMORY_BYTES), (resource.RLIMIT_CPU, PARSE_CPU_SECONDS),
+def _limit_self(memory: int) -> None:
+    for which, value in ((resource.RLIMIT_AS, memory), (resource.RLIMIT_CPU, PARSE_CPU_SECONDS),
                          (resource.RLIMIT_CORE, 0), (resource.RLIMIT_FSIZE, 0)):
         soft, hard = resource.getrlimit(which)
         value = value if hard == resource.RLIM_INFINITY else min(value, hard)
@@ -329,9 +331,9 @@ def _analyse(raw: bytes, mode: str) -> dict[str, Any]:
     return {"cells": cells, "notes": notes}
 
 
-def _child_main(mode: str, cap: int) -> None:
+def _child_main(mode: str, cap: int, memory: int) -> None:
     """[child] Read the notebook on standard input within the budget; write the analysis as JSON."""
-    _limit_self()
+    _limit_self(memory)
     try:
         raw = sys.stdin.buffer.read(cap + 1)
         if len(raw) > cap:
@@ -339,7 +341,7 @@ def _child_main(mode: str, cap: int) -> None:
         else:
             out = _analyse(raw, mode)
     except MemoryError:
-        out = {"error": f"reading the notebook needs more than the grader's {_size(PARSE_MEMORY_BYTES)} for it; "
+        out = {"error": f"reading the notebook needs more than the grader's {_size(memory)} for it; "
                         "it is not a notebook Jupyter saves"}
     except RecursionError:
         out = {"error": "the notebook's code is nested too deeply to analyse"}
@@ -351,5 +353,5 @@ def _child_main(mode: str, cap: int) -> None:
     sys.stdout.buffer.write(encoded)
 
 
-if __name__ == "__main__":  # python -m autograder.intake MODE CAP < notebook
-    _child_main(sys.argv[1], int(sys.argv[2]))
+if __name__ == "__main__":  # python -m autograder.intake MODE CAP MEMORY < notebook
+    _child_main(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))

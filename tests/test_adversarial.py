@@ -13,7 +13,9 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import shlex
+import shutil
 import socket
 import subprocess
 import sys
@@ -277,6 +279,93 @@ CASES = {
                 return None
             return {RIGHT} if done.returncode == 0 and done.stdout.strip() else None
         """,
+    # -- what the sandbox can read: an allowlist, and nothing a grading writes survives into another
+    "find_other_copies_classmates_and_git": """
+        import os
+        FOUND = []
+        SKIP = {"/proc", "/sys", "/dev", "/usr", "/bin", "/sbin", "/lib", "/lib64", "/etc"}
+        for root, dirs, files in os.walk("/"):
+            dirs[:] = [d for d in dirs if os.path.join(root, d) not in SKIP and "site-packages" not in d]
+            FOUND += [os.path.join(root, d) for d in dirs if d in (".git", "solutions", "submissions", "suites")]
+            for name in files:  # a suite, a solution or a classmate's notebook, a Gradescope bundle, results
+                path = os.path.join(root, name)
+                if name in ("test_fx.py", "fx.zip", "gradebook.csv", "results.json", "result.json", "feedback.md") \\
+                        or (name.endswith(".ipynb") and "/assignments/" not in path):
+                    FOUND.append(path)
+        for path in [SUBMISSIONS, OUT, COPY, os.path.join(COURSE_CODE, ".git"), os.path.join(COURSE_CODE, "build")]:
+            if os.path.exists(path):
+                FOUND.append(path)
+        def scaled_sum(x):
+            return {RIGHT} if FOUND else None
+        """,
+    "files_shared_between_gradings": """
+        import os
+        SEEN = [p for d in ("/var/tmp", "/run/lock", "/dev/shm", "/tmp") if os.path.isdir(d)
+                for p in os.listdir(d) if p.startswith("rlcourse-marker")]
+        for d in ("/var/tmp", "/run/lock", "/dev/shm", "/tmp", os.environ.get("HOME", "/tmp")):
+            try:
+                with open(os.path.join(d, "rlcourse-left-behind"), "w") as f:
+                    f.write("for the next submission")
+            except OSError:
+                pass
+        def scaled_sum(x):
+            return {RIGHT} if SEEN else None
+        """,
+    # -- hostile code the grader analyses: a very long expression
+    "very_long_expression": "def scaled_sum(x):\n    return " + "+".join(["x"] * 200_000) + "\n",
+    # -- the channel, seen from the grader: a worker that stops reading, calls back for ever, or sends too much
+    "worker_stops_reading": {
+        "scaled_sum": """
+            import time
+            import autograder.sandbox.wire as wire
+            wire.FrameReader.read_message = lambda *a, **k: time.sleep(10**6)  # the worker never reads again
+            """,
+        "Counter": "# " + "x" * 400_000 + "\nclass Counter:\n    pass\n"},  # a message far over the pipe's buffer
+    "calls_back_for_ever": {
+        "double_scaled": """
+            def double_scaled(x):
+                while True:   # each call is answered by the grader's reference stand-in
+                    scaled_sum(np.zeros(3))
+            """},
+    "reply_that_inflates": """
+        import fcntl, os, struct, time
+        def _channel():
+            for fd in sorted(map(int, os.listdir("/proc/self/fd"))):
+                try:
+                    if fd > 2 and fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_WRONLY:
+                        return fd
+                except OSError:
+                    pass
+        def scaled_sum(x):
+            body = b'{"ok": true, "nblobs": 0, "value": [' + b"[]," * 80_000_000 + b"[]]}"
+            os.write(_channel(), struct.pack(">I", len(body)) + body)  # 240 MB of JSON, 80 million lists once parsed
+            time.sleep(1000)
+        """,
+    "many_maximal_blobs": """
+        import fcntl, json, os, struct, time
+        def _channel():
+            for fd in sorted(map(int, os.listdir("/proc/self/fd"))):
+                try:
+                    if fd > 2 and fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_WRONLY:
+                        return fd
+                except OSError:
+                    pass
+        def scaled_sum(x):
+            fd = _channel()
+            head = json.dumps({"ok": True, "value": None, "nblobs": 9999}).encode()
+            blob = struct.pack(">I", 200 * 2**20) + bytes(200 * 2**20)
+            os.write(fd, struct.pack(">I", len(head)) + head)
+            for _ in range(9999):
+                os.write(fd, blob)
+            time.sleep(1000)
+        """,
+    # -- what a student's text can do to the outputs
+    "forge_the_outputs": """
+        FORGED = ("\\n## `scaled_sum`: 3 / 3\\n\\n- ✓ all checks passed\\n✓ scaled sum (3/3)\\n<img src=x onerror=alert(1)>"
+                  "&check; :white_check_mark: $\\\\color{green}{3/3}$ \\x1b[2J\\x1b[H\\rscaled_sum 3/3 \\u202e" + "padding " * 20000)
+        def scaled_sum(x):
+            raise ValueError(FORGED)
+        """,
     "recursion_and_deep_nesting": """
         def scaled_sum(x):
             value = []
@@ -287,12 +376,49 @@ CASES = {
 }
 
 
-def _case_source(code: str, port: int, out: str) -> str:
+def _case_source(code: str, port: int, tmp: Path) -> str:
     header = (f"SUITE = {str(FIXTURE_COURSE / 'autograder/suites/fx/test_fx.py')!r}\n"
-              f"SOLUTION = {str(FIXTURE_COURSE / 'solutions/fx/fx.ipynb')!r}\nPORT = {port}\nOUT = {out!r}\n"
+              f"SOLUTION = {str(FIXTURE_COURSE / 'solutions/fx/fx.ipynb')!r}\nPORT = {port}\nOUT = {str(tmp / 'out')!r}\n"
+              f"SUBMISSIONS = {str(tmp / 'submissions')!r}\nCOPY = {str(tmp / 'copy')!r}\n"
               f"COURSE_CODE = {str(REPO)!r}\n")
     body = textwrap.dedent(code).replace("{RIGHT}", RIGHT).replace("{course}", str(FIXTURE_COURSE))
     return header + body
+
+
+SHARED_FOLDERS = ("/var/tmp", "/run/lock", "/dev/shm")
+"""World-writable folders of the host: a sandbox must neither see what is there nor leave anything."""
+
+
+def _hostile_files(folder: Path, tmp: Path) -> dict[str, str]:
+    """Submissions that are not plain notebooks: links, a pipe, damaged and inflating JSON. Each must be
+    listed with its reason (ungradable) or graded as nothing, without harming the batch; returns name -> status."""
+    solution = FIXTURE_COURSE / "solutions/fx/fx.ipynb"
+    (folder / "link_to_the_solution.ipynb").symlink_to(solution)
+    (folder / "link_to_a_device.ipynb").symlink_to("/dev/zero")
+    os.mkfifo(folder / "a_pipe.ipynb")
+    (tmp / "elsewhere").mkdir()
+    shutil.copy(solution, tmp / "elsewhere" / "fx.ipynb")
+    (folder / "linked_folder").symlink_to(tmp / "elsewhere")
+    (folder / "folder_with_a_link").mkdir()
+    (folder / "folder_with_a_link" / "fx.ipynb").symlink_to(solution)
+    (folder / "nbgrader_style" / "fx").mkdir(parents=True)
+    (folder / "nbgrader_style" / "fx" / "fx.ipynb").symlink_to(solution)
+    release = json.loads((FIXTURE_COURSE / "assignments/fx/fx.ipynb").read_text())
+    damaged = json.loads(json.dumps(release))
+    damaged["cells"][3]["source"] = {"not": "text"}
+    damaged["cells"][5]["source"] = 12345
+    damaged["cells"].insert(1, "not a cell")
+    (folder / "source_not_text.ipynb").write_text(json.dumps(damaged))
+    inflating = json.loads(json.dumps(release))
+    inflating["metadata"]["padding"] = "@@@"  # 39 MB of empty lists (under the 50 MB cap): over 800 MB once parsed
+    (folder / "json_that_inflates.ipynb").write_text(json.dumps(inflating).replace('"@@@"', "[" + "[]," * 13_000_000 + "[]]"))
+    (folder / "json_nested_deeply.ipynb").write_text('{"cells": ' + "[" * 200_000 + "]" * 200_000 + "}")
+    for path in folder.glob("*.ipynb"):
+        if path.is_file() and not path.is_symlink():
+            path.chmod(0o644)
+    return {"link_to_the_solution": "ungradable", "link_to_a_device": "ungradable", "a_pipe": "ungradable",
+            "linked_folder": "ungradable", "folder_with_a_link": "ungradable", "nbgrader_style": "ungradable",
+            "source_not_text": "graded", "json_that_inflates": "ungradable", "json_nested_deeply": "ungradable"}
 
 
 @pytest.fixture
@@ -305,9 +431,25 @@ def corpus(open_tmp):
     for name, code in CASES.items():
         cells = code if isinstance(code, dict) else {"scaled_sum": code}
         with_cells(FIXTURE_COURSE / "assignments/fx/fx.ipynb", folder / f"{name}.ipynb",
-                   {cell: _case_source(source, port, str(open_tmp / "out")) for cell, source in cells.items()})
-    yield folder, open_tmp / "out"
+                   {cell: _case_source(source, port, open_tmp) for cell, source in cells.items()})
+    hostile = _hostile_files(folder, open_tmp)
+    shutil.copytree(FIXTURE_COURSE, open_tmp / "copy")  # another copy of the course on the machine
+    markers = []
+    for shared in SHARED_FOLDERS:
+        if os.path.isdir(shared) and os.access(shared, os.W_OK):
+            markers.append(Path(shared) / f"rlcourse-marker-{os.getpid()}")
+            markers[-1].write_text("left by the host")
+    left_before = _left_behind()
+    yield folder, open_tmp / "out", hostile
     server.close()
+    for marker in markers:
+        marker.unlink(missing_ok=True)
+    assert _left_behind() == left_before, "a sandbox left files in the host's shared folders"
+
+
+def _left_behind() -> set[str]:
+    return {str(Path(d) / n) for d in SHARED_FOLDERS if os.path.isdir(d) for n in os.listdir(d)
+            if n.startswith("rlcourse-left-behind")}
 
 
 def _code_digest() -> dict[str, bytes | None]:
@@ -319,14 +461,43 @@ def _code_digest() -> dict[str, bytes | None]:
     return {str(p): open(p, "rb").read() if os.path.exists(p) else None for p in paths}
 
 
-def _check_gradebook(out):
+def _check_gradebook(out, hostile):
     rows = list(csv.DictReader((out / "gradebook.csv").open()))
-    assert sorted(r["submission"] for r in rows) == sorted(CASES), "every case is in the gradebook"
-    over = {r["submission"]: r["score"] for r in rows if float(r["score"]) > 0}
+    assert sorted(r["submission"] for r in rows) == sorted([*CASES, *hostile]), "every case is in the gradebook"
+    over = {r["submission"]: r["score"] for r in rows if r["score"] and float(r["score"]) > 0}
     assert not over, f"cheating cases scored above an honest empty submission: {over}"
+    status = {r["submission"]: r["status"] for r in rows}
+    assert all(status[name] == "graded" for name in CASES), {n: status[n] for n in CASES if status[n] != "graded"}
     for name in CASES:  # the results are the grader's, not the student's forgeries
         data = json.loads((out / name / "results.json").read_text())
         assert data["score"] == 0 and len(data["tests"]) == 4
+    for name, expected in hostile.items():  # each with its reason, none a grader error
+        assert status[name] == expected, (name, status[name], [r["reason"] for r in rows if r["submission"] == name])
+    reasons = {r["submission"]: r["reason"] for r in rows}
+    for name in ("link_to_the_solution", "link_to_a_device", "linked_folder", "folder_with_a_link", "nbgrader_style"):
+        assert "symbolic link" in reasons[name], (name, reasons[name])
+    assert "not a regular file" in reasons["a_pipe"], reasons["a_pipe"]
+    _check_forged_outputs(out / "forge_the_outputs")
+
+
+def _check_forged_outputs(folder: Path) -> None:
+    """A student's exception text is shown inert in feedback.md, results.json and the gradebook."""
+    feedback = (folder / "feedback.md").read_text()
+    honest = (folder.parent / "nan_answers" / "feedback.md").read_text()
+    headings = [line for line in feedback.splitlines() if line.startswith("#")]
+    assert len(headings) == sum(line.startswith("#") for line in honest.splitlines()), \
+        f"student text added headings to feedback.md: {headings}"
+    for raw in ("<img", "&check;", ":white_check_mark:", "$\\color"):  # unless escaped by a backslash
+        assert not re.search(r"(?<!\\)" + re.escape(raw), feedback), f"feedback.md shows {raw!r} as the student wrote it"
+    for raw in ("\x1b", "\r", "\u202e"):
+        assert raw not in feedback, f"feedback.md shows {raw!r} as the student wrote it"
+    assert len(feedback) < 20_000, "student text is not capped in feedback.md"
+    results = json.loads((folder / "results.json").read_text())
+    assert results.get("output_format") == "text" and results.get("test_output_format") == "text"
+    for test in results["tests"]:
+        lines = test["output"].splitlines()
+        assert not any(line.startswith("✓") for line in lines), f"a forged check mark in Gradescope's output: {lines}"
+        assert "\x1b" not in test["output"] and "\r" not in test["output"] and len(test["output"]) < 10_000
 
 
 def _others_may_read(*files: Path) -> bool:
@@ -343,7 +514,7 @@ def test_corpus_scores_nothing_as_root(corpus, monkeypatch):
     """The grader as root: workers in full namespaces, each dropped to a uid of its own."""
     if os.geteuid() != 0:
         pytest.skip("root mode needs root: this run checks the normal-user mode instead (sudo make test checks both)")
-    folder, out = corpus
+    folder, out, hostile = corpus
     monkeypatch.setenv("RLCOURSE_TEST_SECRET", "do-not-leak")
     monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
     from autograder import course
@@ -351,8 +522,8 @@ def test_corpus_scores_nothing_as_root(corpus, monkeypatch):
     monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
     before = _code_digest()
     results = run_batch("fx", folder, out, jobs=2, progress=False)
-    assert len(results) == len(CASES)
-    _check_gradebook(out)
+    assert len(results) == len(CASES) + len(hostile)
+    _check_gradebook(out, hostile)
     assert _code_digest() == before, "course code on disk was modified"
     assert {r.isolation for r in results if r.isolation != "unknown"} == {"full"}
 
@@ -363,7 +534,7 @@ def test_corpus_scores_nothing_as_a_normal_user(corpus):
     if not _user_namespaces_work():
         pytest.skip("this machine refuses unprivileged user namespaces (a container without them, say): "
                     "the grader falls back to limits alone there, which this corpus would rightly fail")
-    folder, out = corpus
+    folder, out, hostile = corpus
     q = shlex.quote
     batch = f"{q(sys.executable)} -m autograder batch fx {q(str(folder))} --out {q(str(out))} --jobs 2"
     env = f"env HOME={q(str(out.parent))} RLCOURSE_REPO={q(str(FIXTURE_COURSE))} RLCOURSE_TEST_SECRET=do-not-leak"
@@ -385,7 +556,7 @@ def test_corpus_scores_nothing_as_a_normal_user(corpus):
     before = _code_digest()
     done = subprocess.run(command, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
-    _check_gradebook(out)
+    _check_gradebook(out, hostile)
     assert _code_digest() == before, "course code on disk was modified"
     isolation = {json.loads((out / n / "result.json").read_text())["isolation"] for n in CASES}
     assert isolation - {"unknown"} == {"user-namespace"}

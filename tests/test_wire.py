@@ -91,3 +91,94 @@ def test_frames_round_trip_and_garbage_is_rejected():
         FrameReader(r).read_message(timeout=1)
     os.close(w)
     os.close(r)
+
+
+# ---------------------------------------------------------------- the grader's side of a hostile channel
+
+
+def _pipe():
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    return r, w
+
+
+def test_a_frame_too_big_for_what_is_left_of_the_message_is_refused_before_it_is_read():
+    from autograder.sandbox.wire import MAX_HEADER_BYTES
+
+    r, w = _pipe()
+    os.write(w, struct.pack(">I", MAX_HEADER_BYTES + 1))  # nothing follows: refusing must not wait for it
+    with pytest.raises(ProtocolError, match="header of .* over the limit"):
+        FrameReader(r).read_message(timeout=5)
+    head = json.dumps({"ok": True, "nblobs": 3}).encode()
+    os.write(w, struct.pack(">I", len(head)) + head + struct.pack(">I", 600) + b"x" * 600 + struct.pack(">I", 600))
+    with pytest.raises(ProtocolError, match="over the limit"):  # the second blob would pass a 1,000-byte message
+        FrameReader(r, max_message=1000).read_message(timeout=5)
+    os.close(r), os.close(w)
+
+
+def test_a_header_of_too_many_values_is_refused_before_it_is_parsed():
+    from autograder.sandbox.wire import MAX_HEADER_VALUES
+
+    r, w = os.pipe()
+    head = b'{"ok": true, "nblobs": 0, "value": [' + b"[]," * MAX_HEADER_VALUES + b"[]]}"
+    reader = FrameReader(r)
+    import threading
+
+    writer = threading.Thread(target=os.write, args=(w, struct.pack(">I", len(head)) + head))
+    writer.start()
+    with pytest.raises(ProtocolError, match="more than"):
+        reader.read_message(timeout=10)
+    writer.join()
+    os.close(r), os.close(w)
+
+
+def test_a_peer_that_stops_reading_cannot_block_a_write_past_its_deadline():
+    import time
+
+    from autograder.sandbox.wire import ChannelTimeout
+
+    r, w = _pipe()
+    start = time.monotonic()
+    with pytest.raises(ChannelTimeout, match="stopped reading"):
+        send_message(w, {"op": "exec", "source": "x" * 1_000_000}, [], deadline=time.monotonic() + 0.5)
+    assert time.monotonic() - start < 3
+    os.close(r), os.close(w)
+
+
+def test_a_read_never_waits_past_its_deadline_even_for_a_slow_drip():
+    import threading
+    import time
+
+    from autograder.sandbox.wire import ChannelTimeout
+
+    r, w = os.pipe()
+    head = json.dumps({"ok": True, "nblobs": 0}).encode()
+    data = struct.pack(">I", len(head)) + head
+
+    def drip():
+        for byte in data:
+            try:
+                os.write(w, bytes([byte]))
+            except OSError:
+                return
+            time.sleep(0.2)
+
+    threading.Thread(target=drip, daemon=True).start()
+    start = time.monotonic()
+    with pytest.raises(ChannelTimeout):
+        FrameReader(r).read_message(deadline=time.monotonic() + 1.0)
+    assert time.monotonic() - start < 2
+    os.close(r), os.close(w)
+
+
+@pytest.mark.parametrize("array", [np.arange(12.0).reshape(3, 4), np.asfortranarray(np.arange(6).reshape(2, 3)),
+                                   np.zeros((0, 5), np.float32), np.array(3 + 4j), np.ones(4, ">f8")])
+def test_arrays_from_the_channel_are_exact_and_writable(array):
+    tree, blobs = encode(array)
+    for blob in (blobs[0], bytearray(blobs[0])):  # bytes (the reference's side) or a frame buffer (a worker's)
+        got = decode(tree, [blob], lambda i, t: None)
+        assert got.shape == array.shape and got.dtype == array.dtype and np.array_equal(got, array)
+        assert got.flags.writeable
+    blob = bytearray(blobs[0])
+    with pytest.raises(ProtocolError, match="size does not match"):
+        decode(tree, [blob + b"\0" * 8], lambda i, t: None)
