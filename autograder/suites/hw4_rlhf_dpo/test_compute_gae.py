@@ -83,7 +83,7 @@ def test_lambda_limits(student, rng):
     _check(student, (r, v, np.zeros((7, 4)), last), 1.0, 1.0, "gamma = lam = 1, no dones")
 
 
-@stub("compute_gae", points=1, hint="Work on (T, N) tensors and return two (T, N) tensors; do not modify the inputs.")
+@stub("compute_gae", points=1, hint=HINT)
 def test_shapes_single_step_and_inputs_untouched(student, rng):
     """One step of one environment; a long rollout; the inputs are not modified in place"""
     _check(student, _inputs(rng, 1, 1, 0.5), 0.99, 0.95, "a single step")

@@ -60,13 +60,17 @@ def test_matches_hand_computation(student, rng):
 
 @stub("dpo_loss", points=1, hint="With policy == reference every log-ratio is 0, the margin is 0, and the loss is log 2.")
 def test_log2_at_the_reference(student, rng):
-    """policy == reference (same weights) for several betas: loss log 2, margin 0, accuracy 0"""
+    """policy == reference (same weights) for several betas: loss log 2, margin 0, accuracy 0; moved away, not log 2"""
     d = _data(rng, 7, 25)
     for beta in (0.01, 0.5, 5.0):
         loss, info = _student_call(student, d, beta, s=4, rs=4)
         check_scalar(float(loss), np.log(2), rtol=1e-5, name=f"the loss at policy == reference (beta {beta})")
         check_scalar(float(info["margin"]), 0.0, atol=1e-5, name="info['margin'] at policy == reference")
         check_scalar(float(info["accuracy"]), 0.0, name="info['accuracy'] at policy == reference (no margin is > 0)")
+    loss, _ = _student_call(student, d, 0.5, s=4, rs=4, shift=0.4)
+    want, _ = _hand_loss(_policy(4, -0.5, 0.4), _policy(4, -0.5), d["co"], d["ca"], d["ro"], d["ra"], 0.5)
+    assert abs(float(loss) - np.log(2)) > 1e-4, "the loss is log 2 even when the policy has moved away from the reference"
+    check_scalar(float(loss), want, rtol=1e-4, atol=1e-5, name="the loss once the policy's mean has moved")
 
 
 @stub("dpo_loss", points=2, hint="The gradient must flow through the policy's log-likelihoods (keep the graph) and "
@@ -112,14 +116,15 @@ def test_logged_metrics(student, rng):
     assert all(not (torch.is_tensor(v) and v.requires_grad) for v in info.values()), "detach the logged metrics"
 
 
-@stub("dpo_loss", points=1, hint="Use F.logsigmoid(margin), not log(sigmoid(margin)): a margin of -1000 gives loss "
-      "1000, not inf.")
+@stub("dpo_loss", points=1, hint=HINT)
 def test_large_margins_are_stable(student, rng):
     """A policy far from its reference with a large beta: finite loss equal to softplus(-margin)"""
     d = _data(rng, 6, 25)
     loss, _ = _student_call(student, d, 50.0, rs=9, shift=0.8, dstd=-0.8)
     want, m = _hand_loss(_policy(0, -0.5, 0.8, -0.8), _policy(9, -0.5), d["co"], d["ca"], d["ro"], d["ra"], 50.0)
     assert np.abs(m).max() > 200, "test set-up: margins should be large"
+    assert np.isfinite(float(loss)), ("the loss is not finite when margins are in the hundreds: use "
+                                      "F.logsigmoid(margin), not log(sigmoid(margin)) (a margin of -1000 gives 1000)")
     check_scalar(float(loss), want, rtol=1e-3, name="the loss with margins in the hundreds")
 
 
@@ -128,8 +133,21 @@ def test_no_gradient_into_the_reference(student, rng):
     """After backward, the policy has gradients and the reference has none"""
     d = {k: torch.as_tensor(v) for k, v in _data(rng, 5, 5).items()}
     expr = (f"(lambda p, r: (dpo_loss(p, r, (co, ca), (ro, ra), 0.5)[0].backward(), "
-            "(p.mean.bias.grad is not None, all(q.grad is None for q in r.parameters())))[1])"
+            "(p.mean.bias.grad, all(q.grad is None for q in r.parameters())))[1])"
             f"({SHIFTED}, {REF}.requires_grad_(True))")
-    flags = student.eval(expr, s=0, rs=1, ls=-0.5, shift=0.1, dstd=0.0, **d)
-    assert list(flags) == [True, True], ("gradients should reach the policy and never the reference "
-                                         f"(policy has grad, reference has none) = {tuple(flags)}")
+    out = student.eval(expr, s=0, rs=1, ls=-0.5, shift=0.1, dstd=0.0, **d)
+    assert isinstance(out, (tuple, list)) and len(out) == 2, "could not differentiate the loss"
+    policy_grad, reference_clean = out
+    assert policy_grad is not None, "the policy gets no gradient: keep the graph through its log-likelihoods"
+    assert reference_clean is True, ("the reference's parameters got gradients: compute its log-likelihoods under "
+                                     "torch.no_grad() (or detach them)")
+    pol, ref = _policy(0, -0.5, 0.1), _policy(1, -0.5)
+    for p in ref.parameters():
+        p.requires_grad_(False)
+    beta = 0.5
+    def seq(policy, o, a):
+        return policy.log_prob(o, a).sum(-1)
+    m = beta * ((seq(pol, d["co"], d["ca"]) - seq(ref, d["co"], d["ca"])) - (seq(pol, d["ro"], d["ra"]) - seq(ref, d["ro"], d["ra"])))
+    (-torch.nn.functional.logsigmoid(m).mean()).backward()
+    check_tensor(policy_grad, pol.mean.bias.grad, rtol=1e-4, atol=1e-6,
+                 name="the gradient of the loss with respect to the policy's mean bias")

@@ -78,10 +78,13 @@ def test_normalisation_and_offset(student, rng):
 @stub("LearnedRewardWrapper", points=1, hint="Add 'true_reward' to the env's info dict; keep the keys already there "
       "(the PPO loop needs info['final_obs'] at episode ends).")
 def test_info_keeps_env_keys(student, rng):
-    """On a step where an episode ends, info still holds the env's own 'final_obs' beside 'true_reward'"""
+    """On a step where an episode ends, info still holds the env's own 'final_obs' beside 'true_reward', and the reward there is the learned one"""
     acts = _actions(rng, 80)
-    want = _expected(acts, 0.0, 1.0, 0.0)
-    _, got = _run(student, acts, 0.0, 1.0, 0.0)
+    want = _expected(acts, 0.5, 2.0, 0.0)
+    _, got = _run(student, acts, 0.5, 2.0, 0.0)
     ends = [t for t, w in enumerate(want) if w[3].any()]
     assert ends, "test set-up: some episode should end within 80 random steps"
     assert all(got[t][4] for t in ends), "info lost the env's 'final_obs' key on a step where an episode ended"
+    for t in ends:
+        check_array(got[t][1], want[t][1].astype(float), rtol=1e-5, atol=1e-5,
+                    name="the reward on a step where an episode ended (the learned reward, not the env's)")

@@ -109,5 +109,5 @@ def test_diagnostics(student):
                          "for t in out[1].values())))(ppo_loss(torch.zeros(3, requires_grad=True), z, a, "
                          "torch.zeros(3, requires_grad=True), z, torch.zeros(3, requires_grad=True), "
                          "torch.zeros(3, requires_grad=True), 0.2, 0.5, 0.01, 0.1))", z=torch.zeros(3), a=torch.ones(3))
-    assert list(flags) == [True, False], ("the loss must keep its graph and every logged term must be detached "
-                                          f"(loss requires grad, any term requires grad) = {tuple(flags)}")
+    assert flags[0] is True, "the loss has no autograd graph: compute it with torch operations on the inputs"
+    assert flags[1] is False, "a logged term still carries the autograd graph: detach every value in the terms dict"
