@@ -30,11 +30,15 @@ def test_by_hand(student, rng):
                      name=f"the loss at beta = {beta}")
 
 
-@stub("dpo_loss", points=1, hint="When the policy equals the reference every margin is 0 and the loss is log 2.")
+@stub("dpo_loss", points=1, hint=HINT)
 def test_log2_at_reference(student, rng):
-    """pi = pi_ref gives log 2 whatever the log-probabilities and beta"""
-    pc, pr, _, _ = _inputs(rng)
-    check_scalar(_value(student.dpo_loss(pc, pr, pc.clone(), pr.clone(), 0.7)), np.log(2.0))
+    """pi = pi_ref gives log 2 whatever the log-probabilities and beta; moved away from it, the loss moves"""
+    pc, pr, rc, rr = _inputs(rng)
+    check_scalar(_value(student.dpo_loss(pc, pr, pc.clone(), pr.clone(), 0.7)), np.log(2.0),
+                 name="the loss when the policy equals the reference (every margin 0: log 2)")
+    got = _value(student.dpo_loss(pc, pr, rc, rr, 0.7))
+    assert abs(got - np.log(2.0)) > 1e-6, "the loss is log 2 even though the policy differs from the reference"
+    check_scalar(got, _by_hand(pc, pr, rc, rr, 0.7), rtol=1e-6, name="the loss when the policy differs from the reference")
 
 
 @stub("dpo_loss", points=2, hint=HINT)
@@ -57,12 +61,14 @@ def test_gradient_by_finite_difference(student, rng):
         "the loss should fall as pi_chosen rises and rise with pi_rejected"
 
 
-@stub("dpo_loss", points=1, hint="Chosen minus rejected inside the sigmoid; use F.logsigmoid for stability.")
+@stub("dpo_loss", points=1, hint=HINT)
 def test_direction_and_extremes(student):
     """Favouring the chosen completion lowers the loss; margins of +-1000 stay finite"""
     z = torch.zeros(1)
     up = _value(student.dpo_loss(torch.tensor([1.0]), z, z, z, 1.0))
     down = _value(student.dpo_loss(z, torch.tensor([1.0]), z, z, 1.0))
-    assert up < np.log(2) < down, "raising pi_chosen above the reference must lower the loss below log 2"
-    check_scalar(_value(student.dpo_loss(torch.tensor([-1000.0]), z, z, z, 1.0)), 1000.0, rtol=1e-6,
-                 name="the loss at margin -1000")
+    assert up < np.log(2) < down, ("raising pi_chosen above the reference must lower the loss below log 2: the margin "
+                                   "is (pi_chosen - ref_chosen) - (pi_rejected - ref_rejected), chosen minus rejected")
+    extreme = _value(student.dpo_loss(torch.tensor([-1000.0]), z, z, z, 1.0))
+    assert np.isfinite(extreme), "the loss at margin -1000 is not finite: use F.logsigmoid, not log(sigmoid(.))"
+    check_scalar(extreme, 1000.0, rtol=1e-6, name="the loss at margin -1000")

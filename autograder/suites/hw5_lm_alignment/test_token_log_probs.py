@@ -77,9 +77,11 @@ def test_sequence_log_prob_is_masked_sum(student, rng, ragged_batch):
 
 @stub("sequence_log_prob", points=1, hint=SEQ_HINT)
 def test_sequence_log_prob_ignores_padding(student, rng, ragged_batch):
-    """Appending padded columns (with any logits) to every sequence changes nothing"""
+    """Appending padded columns (with any logits) to every sequence changes nothing, and the result is the masked sum"""
     logits, tokens, mask = ragged_batch(rng, b=3)
     base = _as_np(student.sequence_log_prob(logits, tokens, mask))
+    check_array(base, direct_token_log_probs(logits, tokens, mask).sum(1), rtol=1e-5, atol=1e-6,
+                name="the log-probabilities before padding (the masked sum of the completion's token log-probabilities)")
     longer = student.sequence_log_prob(torch.cat([logits, torch.as_tensor(rng.normal(scale=50, size=(3, 4, logits.shape[-1])))], 1),
                                        torch.cat([tokens, torch.zeros(3, 4, dtype=tokens.dtype)], 1),
                                        torch.cat([mask, torch.zeros(3, 4, dtype=mask.dtype)], 1))
