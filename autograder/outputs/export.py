@@ -45,7 +45,7 @@ class FinalGrade:
 
 
 def final_grades(gb) -> list[FinalGrade]:
-    """Every student × assignment of the gradebook, students and assignments in the gradebook's order."""
+    """Every student × assignment of the gradebook, by assignment name, then student id."""
     from nbgrader.api import MissingEntry
 
     out = []
@@ -55,7 +55,8 @@ def final_grades(gb) -> list[FinalGrade]:
             try:
                 submission = gb.find_submission(assignment.name, student.id)
             except MissingEntry:
-                out.append(FinalGrade(student.id, *names, assignment.name, 0.0, 0.0, assignment.max_score, "", False, 0))
+                out.append(FinalGrade(student.id, *names, assignment.name, 0.0, 0.0, assignment.max_score, "",
+                                      submitted=False, waiting=0))
                 continue
             grades = [g for nb in submission.notebooks for g in nb.grades]
             late = ""

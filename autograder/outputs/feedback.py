@@ -106,7 +106,7 @@ def write_feedback(assignment: str, results_dir: Path, course_root: Path | None 
 
 
 def generate_feedback_html(assignment: str, coursedir) -> None:
-    """``nbgrader generate_feedback`` for every student placed for formgrader (``feedback/<student>/<id>/<id>.html``)."""
+    """``nbgrader generate_feedback`` for every student placed for formgrader: ``feedback/<student>/<id>/<id>.html``."""
     with_nbgrader_path()
     command = [str(Path(sys.executable).parent / "nbgrader"), "generate_feedback", assignment, "--force",
                f"--CourseDirectory.root={coursedir.root}", f"--CourseDirectory.db_url={coursedir.db_url}"]

@@ -230,8 +230,8 @@ def _harmless_url(url: str) -> bool:
 def _no_scheme_links(text: str) -> str:
     """Links (inline and reference) whose target has a scheme other than http(s) or mailto, shown as text."""
     text = _LINK_TARGET.sub(lambda m: m.group(0) if _harmless_url(m.group(1)) else "]\\(" + m.group(0)[2:], text)
-    return _REFERENCE.sub(lambda m: m.group(0) if _harmless_url(m.group(3)) else f"{m.group(1)}\\{m.group(2)}{m.group(3)}",
-                          text)
+    return _REFERENCE.sub(
+        lambda m: m.group(0) if _harmless_url(m.group(3)) else f"{m.group(1)}\\{m.group(2)}{m.group(3)}", text)
 
 
 class _Elements(HTMLParser):
