@@ -5,6 +5,7 @@ sequences, on the gold reward (a program) and on the learned proxy; IPO, KTO and
     python bench/bench_hw6_group_rl.py                    # 3 seeds one after the other, then the tables
     python bench/bench_hw6_group_rl.py --seed 1           # one seed, written to bench/results/hw6_group_rl.seed1.json
     python bench/bench_hw6_group_rl.py --merge            # merge the per-seed files into bench/results/hw6_group_rl.json
+    python bench/bench_hw6_group_rl.py --all-variants     # also Dr. GRPO, RLOO and PPO on the proxy
 
 Every number comes from the reference solutions: hw6's notebook (its setup and stub cells, executed here) for
 the critic-free runs, IPO, KTO and DPO, and hw5's notebook for PPO with its value head (``ppo_train``), all on
@@ -27,9 +28,9 @@ REPO = Path(__file__).resolve().parents[1]
 HW6 = REPO / "solutions" / "hw6_group_rl" / "hw6_group_rl.ipynb"
 HW5 = REPO / "solutions" / "hw5_lm_alignment" / "hw5_lm_alignment.ipynb"
 RESULTS = REPO / "bench" / "results"
-# hw6's full budgets (its parameters cell with FAST = False); the pool is larger than the notebook's.
-BUDGET = dict(N_PAIRS=3000, RM_STEPS=120, N_EVAL=128, RL_ITERS=30, RL_PROMPTS=8, RL_GROUP=8, OFFLINE_STEPS=90,
-              OFFLINE_BETA=0.1, POOL_PROMPTS=16, POOL_SIZE=256, FIT_MAX_N=16, PPO_BATCH=64, KL_BETA=0.0)
+# hw6's full budgets (its parameters cell with FAST = False).
+BUDGET = dict(N_PAIRS=3000, RM_STEPS=120, N_EVAL=64, RL_ITERS=30, RL_PROMPTS=8, RL_GROUP=8, OFFLINE_STEPS=90,
+              OFFLINE_BETA=0.1, POOL_PROMPTS=8, POOL_SIZE=256, FIT_MAX_N=16, PPO_BATCH=64, KL_BETA=0.0)
 
 
 def solution_namespace(path: Path) -> dict:
@@ -45,8 +46,12 @@ def solution_namespace(path: Path) -> dict:
     return ns
 
 
-def run_seed(seed: int) -> dict:
-    """Every method's gold reward, proxy reward, KL, wall time and curve for one seed; best-of-n from one pool."""
+def run_seed(seed: int, all_variants: bool = False) -> dict:
+    """Every method's gold reward, proxy reward, KL, wall time and curve for one seed; best-of-n from one pool.
+
+    Each method's row is written to the seed's file as soon as it is measured, and a rerun skips the rows
+    already there (the reward model, deterministic given the seed, is fitted again).
+    """
     import torch
 
     from rlcourse import group_rl as G
@@ -66,7 +71,13 @@ def run_seed(seed: int) -> dict:
     rm = G.fit_reward_model(sft, chosen[tr], rejected[tr], BUDGET["RM_STEPS"], seed=seed)
     rm_s = time.perf_counter() - t0
     gold_fn, proxy_fn = hw6["gold_fn"], (lambda s: G.proxy_score(rm, s))
-    out: dict = {"reward_model_s": rm_s, "methods": {}}
+    done = json.loads(seed_file(seed).read_text()) if seed_file(seed).exists() else {}
+    out: dict = {"reward_model_s": done.get("reward_model_s", rm_s), "methods": done.get("methods", {})}
+    if "best_of_n" in done:
+        out["best_of_n"] = done["best_of_n"]
+
+    def save():
+        seed_file(seed).write_text(json.dumps(out) + "\n")
 
     def record(name, policy, seconds, log=None):
         e = hw6["evaluate"](policy, sft, rm, eval_prompts, seed=seed)
@@ -76,17 +87,23 @@ def run_seed(seed: int) -> dict:
         out["methods"][name] = row
         print(f"  seed {seed} {name:<20} {seconds:6.0f} s  KL {e['kl']:6.2f}  proxy {e['proxy']:+.2f}  gold {e['gold']:+.3f}",
               file=sys.stderr, flush=True)
+        save()
 
-    record("SFT", sft, 0.0)
+    if "SFT" not in out["methods"]:
+        record("SFT", sft, 0.0)
     it, n_p, grp = BUDGET["RL_ITERS"], BUDGET["RL_PROMPTS"], BUDGET["RL_GROUP"]
     for target, fn in (("gold", gold_fn), ("proxy", proxy_fn)):
-        variants = ("GRPO", "Dr. GRPO", "RLOO") if target == "gold" else ("GRPO",)
+        variants = ("GRPO", "Dr. GRPO", "RLOO") if target == "gold" and all_variants else ("GRPO",)
         for variant in variants:
+            if f"{variant} ({target})" in out["methods"]:
+                continue
             t0 = time.perf_counter()
             policy, log = hw6["critic_free_train"](sft, fn, prompts, it, n_p, grp, seed=seed, variant=variant,
                                                    beta=BUDGET["KL_BETA"], rm=rm)
             record(f"{variant} ({target})", policy, time.perf_counter() - t0, log)
         # PPO with a value head (hw5's given loop), same number of sampled sequences, same KL coefficient (0).
+        if f"PPO ({target})" in out["methods"] or (target == "proxy" and not all_variants):
+            continue
         saved = hw5["proxy_reward"]
         if target == "gold":
             hw5["proxy_reward"] = lambda _rm, tokens: gold_fn(tokens)
@@ -114,10 +131,14 @@ def run_seed(seed: int) -> dict:
         "KTO": lambda: hw6["kto_train"](sft, kto_tokens, kto_des, p, b, BUDGET["OFFLINE_STEPS"], seed=seed),
     }
     for name, train in offline.items():
+        if f"{name} beta={b}" in out["methods"]:
+            continue
         t0 = time.perf_counter()
         policy = train()
         record(f"{name} beta={b}", policy, time.perf_counter() - t0)
 
+    if "best_of_n" in out:
+        return out
     t0 = time.perf_counter()
     k, m = BUDGET["POOL_PROMPTS"], BUDGET["POOL_SIZE"]
     pool_prompts = torch.as_tensor(prefs["eval_prompts"])[-k:].repeat_interleave(m, dim=0)   # not the RL eval prompts
@@ -135,6 +156,7 @@ def run_seed(seed: int) -> dict:
         "kl_exact_proxy": [float(np.mean([G.best_of_n_kl(s, n) for s in proxy])) for n in ns],
         "kl_exact_gold": [float(np.mean([G.best_of_n_kl(s, n) for s in gold])) for n in ns],
     }
+    save()
     return out
 
 
@@ -159,7 +181,7 @@ def laws(seeds: dict[str, dict]) -> dict:
                                "predicted": {int(k): float(G.bon_law(dk, a, b)) for k, dk in zip(n[~fit], d[~fit])},
                                "measured": {int(k): float(g) for k, g in zip(n[~fit], gain[~fit])}}
         sft_gold = run["methods"]["SFT"]["gold"]
-        for method in ("GRPO (proxy)", "PPO (proxy)", "GRPO (gold)", "PPO (gold)"):
+        for method in [m for m in ("GRPO (proxy)", "PPO (proxy)", "GRPO (gold)", "PPO (gold)") if m in run["methods"]]:
             c = run["methods"][method]["curve"]
             d, gain = np.sqrt(np.maximum(c["kl"], 0.0)), np.array(c["gold"]) - sft_gold
             first = np.arange(len(d)) < len(d) // 2
@@ -249,6 +271,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--seed", type=int, help="run this one seed and write its file")
     parser.add_argument("--merge", action="store_true", help="merge the per-seed files and print the tables")
+    parser.add_argument("--all-variants", action="store_true",
+                        help="also Dr. GRPO and RLOO on the program and PPO on the proxy (twice the time)")
     parser.add_argument("--smoke", action="store_true", help="tiny budgets, results to a scratch folder (checks the script)")
     args = parser.parse_args()
     if args.smoke:
@@ -260,7 +284,7 @@ def main() -> None:
     todo = [] if args.merge else ([args.seed] if args.seed is not None else list(range(args.seeds)))
     for seed in todo:
         t0 = time.perf_counter()
-        run = run_seed(seed)
+        run = run_seed(seed, args.all_variants)
         run["seconds"] = time.perf_counter() - t0
         seed_file(seed).write_text(json.dumps(run) + "\n")
         print(f"seed {seed}: {run['seconds']:.0f} s", file=sys.stderr, flush=True)

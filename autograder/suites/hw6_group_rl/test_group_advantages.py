@@ -54,3 +54,7 @@ def test_eps_dtype_and_input_left_alone(student, rng):
     expect_close(student.group_advantages(x, eps=0.5), _grpo(r, eps=0.5), "the advantages with eps = 0.5", rtol=1e-5)
     out = student.group_advantages(x.float())
     assert type(out) is torch.Tensor and out.dtype == torch.float32, "float32 rewards should give float32 advantages"
+    for scale in (True, False):
+        out = student.group_advantages(x, scale=scale)
+        assert type(out) is torch.Tensor and out.dtype == torch.float64, \
+            f"float64 rewards should give float64 advantages (scale={scale}): keep the input's dtype"

@@ -42,6 +42,9 @@ def test_clipping_positive_advantage(student):
     loss, grad = _one_token(student, 0.5, 2.0)
     assert np.isclose(loss, -0.5 * 2.0) and np.isclose(grad, -0.5 * 2.0), \
         "A > 0, ratio 0.5: the unclipped term -ratio * A (and its gradient -ratio * A) applies"
+    loss, grad = _one_token(student, 1.15, 2.0, eps=0.1)
+    assert np.isclose(loss, -1.1 * 2.0) and abs(grad) < 1e-9, \
+        "A > 0, ratio 1.15 with clip_eps = 0.1: clip at 1 + clip_eps (use the argument, not a fixed 0.2)"
 
 
 @stub("grpo_token_loss", points=2, hint=HINT)
