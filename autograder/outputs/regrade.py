@@ -74,10 +74,10 @@ def change_lines(changes: list[Change], written: dict[str, float | None] | None 
     ``written`` (the hand-given written score per submission) is known, it and the totals."""
     lines = []
     width = max([len(c.submission) for c in changes] + [10])
-    head = f"{'submission':<{width}}  automatic"
+    head = f"{'submission':<{width}}  {'automatic':<15}"
     if written is not None:
-        head += "        written (by hand, kept)  total"
-    lines.append(head + "        what changed")
+        head += f"  {'written (by hand, kept)':<23}  {'total':<15}"
+    lines.append(head + "  what changed")
     for c in changes:
         auto = f"{_fmt(c.before)} → {_fmt(c.after)}" if c.before != c.after else f"{_fmt(c.after)} (same)"
         line = f"{c.submission:<{width}}  {auto:<15}"
