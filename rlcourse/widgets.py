@@ -1,0 +1,163 @@
+"""Notebook widgets: callbacks that report their errors where the student looks, and hw3's annotator.
+
+A widget's callback runs in the kernel when a button is clicked, outside any cell, so an exception
+it raises does not reach the notebook: JupyterLab sends it to its log console, and the widget just
+stops. Every callback here is wrapped by :func:`report_errors`, which writes the error, in plain
+words, into the widget's own output area. A callback that takes seconds shows it (:func:`busy`):
+its buttons are disabled and its status line says what is happening until it returns.
+"""
+from __future__ import annotations
+
+import base64
+import contextlib
+import functools
+import sys
+import tempfile
+import traceback
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+import numpy as np
+
+_THIS_FILE = str(Path(__file__).resolve())
+# Code that is not the student's: the installed libraries and rlcourse itself.
+_LIBRARY_PREFIXES = tuple({sys.prefix, sys.base_prefix, sys.exec_prefix, str(Path(__file__).resolve().parent)})
+
+
+def _culprit(err: BaseException) -> str | None:
+    """The function that raised ``err``: the innermost frame for ``NotImplementedError`` (the stub
+    itself), else the innermost frame outside this module and the installed libraries (the
+    student's code), else the innermost frame. ``None`` when that frame is not a named function."""
+    frames = [f for f in traceback.extract_tb(err.__traceback__) if f.filename != _THIS_FILE]
+    if not frames:
+        return None
+    if not isinstance(err, NotImplementedError):
+        own = [f for f in frames if not f.filename.startswith(_LIBRARY_PREFIXES)]
+        frames = own or frames
+    name = frames[-1].name
+    return None if name.startswith("<") else name
+
+
+def explain(err: BaseException) -> str:
+    """One sentence a student can act on: what failed, in which function, and what to do next."""
+    name = _culprit(err)
+    where = f"`{name}`" if name else "a function this widget calls"
+    if isinstance(err, NotImplementedError):
+        return (f"{where} is not implemented yet: fill in its cell, run it, "
+                "then click again.")
+    detail = str(err).strip() or "(no message)"
+    return f"{where} raised {type(err).__name__}: {detail}"
+
+
+def report_errors(output, status=None, on_error: Callable[[], None] | None = None) -> Callable:
+    """Decorate a widget callback so that an exception shows in ``output`` (an ``ipywidgets.Output``).
+
+    The message of :func:`explain` goes first; for anything but ``NotImplementedError`` the
+    traceback follows, so the failing line can be found. ``status`` (a widget with a ``value``), when
+    given, is set to a short note pointing at the message, and ``on_error`` runs after (to re-enable
+    buttons, say). The exception is not re-raised: there is no cell for it to reach.
+    """
+    def wrap(callback: Callable) -> Callable:
+        @functools.wraps(callback)
+        def guarded(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return callback(*args, **kwargs)
+            except Exception as err:  # noqa: BLE001 - every error must reach the student, whatever it is
+                output.append_stderr(explain(err) + "\n")
+                if not isinstance(err, NotImplementedError):
+                    output.append_stderr("".join(traceback.format_exception(err)))
+                if status is not None:
+                    status.value = "stopped: the message below says why"
+                if on_error is not None:
+                    on_error()
+                return None
+        return guarded
+    return wrap
+
+
+@contextlib.contextmanager
+def busy(status, buttons: Sequence, message: str) -> Iterator[None]:
+    """While the block runs: ``buttons`` disabled and ``status`` showing ``message`` (a sign of
+    progress for work that takes seconds). The buttons come back even if the block raises."""
+    for button in buttons:
+        button.disabled = True
+    status.value = message
+    try:
+        yield
+    finally:
+        for button in buttons:
+            button.disabled = False
+
+
+def video_html(frames: np.ndarray, fps: int = 12, width: int = 420) -> str:
+    """A self-contained, muted, looping ``<video>`` element holding ``frames`` ``(n, h, w, 3)``."""
+    from rlcourse.video import save_mp4
+
+    with tempfile.TemporaryDirectory() as folder:
+        data = save_mp4(frames, Path(folder) / "clip.mp4", fps=fps).read_bytes()
+    return (f'<video autoplay loop muted playsinline width="{width}" '
+            f'src="data:video/mp4;base64,{base64.b64encode(data).decode()}"></video>')
+
+
+class PreferenceAnnotator:
+    """hw3's "be the annotator": two clips side by side, three buttons, then a reward model.
+
+    ``pairs`` ``(n, 2)`` index the segments of ``obs`` ``(N, L, obs_dim)``; each answer is a label
+    (1 left better, 1/2 can't tell, 0 right better). After the last answer, ``train(pairs, labels)``
+    returns a reward model and ``report(model, labels)`` draws what it learned into the output
+    area and returns a line for the status. Both are called when needed, so a function they look up
+    by name (a stub filled in after the widget was drawn) is the current one. Every error, a stub's
+    included, is shown in the widget; after one, any button tries the failed step again.
+    """
+
+    CHOICES = (("left is better", 1.0), ("can't tell", 0.5), ("right is better", 0.0))
+
+    def __init__(self, obs: np.ndarray, pairs: np.ndarray, train: Callable[[np.ndarray, np.ndarray], Any],
+                 report: Callable[[Any, np.ndarray], str], render: Callable[[np.ndarray], np.ndarray] | None = None,
+                 size: int = 128):
+        import ipywidgets as widgets
+
+        from rlcourse.preferences import render_segment
+
+        self.obs, self.pairs = obs, np.asarray(pairs)
+        self.train, self.report = train, report
+        self.render = render or (lambda segment: render_segment(segment, size=size))
+        self.labels: list[float] = []
+        self.status = widgets.Label()
+        self.clip = widgets.HTML()
+        self.output = widgets.Output()
+        self.buttons = [widgets.Button(description=text) for text, _ in self.CHOICES]
+        for button, (_, mu) in zip(self.buttons, self.CHOICES):
+            button.on_click(report_errors(self.output, self.status)(functools.partial(self._answer, mu)))
+        self.box = widgets.VBox([self.status, self.clip, widgets.HBox(self.buttons), self.output])
+
+    @property
+    def n_labels(self) -> int:
+        return len(self.pairs)
+
+    def start(self):
+        """Render the first pair and return the widget to display."""
+        self._show(0)
+        return self.box
+
+    def _show(self, k: int) -> None:
+        left, right = (self.render(self.obs[i]) for i in self.pairs[k])
+        from rlcourse.video import side_by_side
+
+        self.clip.value = video_html(side_by_side([left, right]))
+        self.status.value = f"pair {k + 1} of {self.n_labels}: which hops better?"
+
+    def _answer(self, mu: float, _button=None) -> None:
+        if len(self.labels) < self.n_labels:
+            self.labels.append(mu)
+        k = len(self.labels)
+        if k < self.n_labels:
+            with busy(self.status, self.buttons, f"rendering pair {k + 1} of {self.n_labels}..."):
+                self._show(k)
+            return
+        labels = np.array(self.labels, dtype=np.float32)
+        self.output.outputs = ()  # an earlier attempt's error or plot
+        with busy(self.status, self.buttons, f"training a reward model on your {k} labels..."):
+            model = self.train(self.pairs, labels)
+            with self.output:  # what report draws (a plot) goes to the widget's output area
+                self.status.value = self.report(model, labels)
