@@ -59,3 +59,13 @@ def test_bundle_grades_a_submission_in_a_gradescope_layout(tmp_path):
     assert results["score"] == 5
     assert [t["score"] for t in results["tests"]] == [5, 0]
     assert all(t["visibility"] == "visible" for t in results["tests"])
+
+    # A submission that is a link to the solution is graded as nothing, with the reason, never followed.
+    (root / "submission" / "my_work.ipynb").unlink()
+    (root / "submission" / "my_work.ipynb").symlink_to(REPO / "solutions/hw0_setup/hw0_setup.ipynb")
+    done = subprocess.run(["bash", str(source / "run_autograder")], env=dict(os.environ, GRADESCOPE_ROOT=str(root)),
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    results = json.loads((root / "results" / "results.json").read_text())
+    assert results["score"] == 0 and "symbolic link" in results["output"], results["output"]
+    assert results["output_format"] == "text"
