@@ -143,12 +143,18 @@ def test_the_placed_notebook_shows_the_graded_cells_and_no_student_html(term):
     nb.metadata["widgets"] = {"application/vnd.jupyter.widget-state+json": {"state": {}}}
     for cell in nb.cells:  # a student who lost every cell's metadata: stubs are found by the names they define
         cell.metadata = {}
+    counter = next(i for i, c in enumerate(nb.cells) if c.source.startswith("class Counter"))
+    mean_of = next(c for c in nb.cells if c.source.startswith("def mean_of"))
+    nb.cells[counter].source += "\n\n" + mean_of.source  # two stubs in one cell
+    nb.cells.remove(mean_of)
     nbformat.write(nb, str(folder / "alice.ipynb"))
     gradebook.sync("fx", folder, out, root)
     placed = nbformat.read(str(root / "autograded" / "alice" / "fx" / "fx.ipynb"), as_version=4)
     graded_cells = {c.metadata["nbgrader"]["grade_id"]: c for c in placed.cells if "nbgrader" in c.metadata}
     assert {k: c.metadata["nbgrader"]["points"] for k, c in graded_cells.items()} == {**POINTS, "q_why": 2.0}
-    assert graded_cells["mean_of"].source.startswith("def mean_of")
+    assert graded_cells["Counter"].source.startswith("class Counter") and "def mean_of" in graded_cells["Counter"].source
+    assert graded_cells["mean_of"].source == "# `mean_of` is defined in the cell of `Counter` above."
+    assert graded_cells["scaled_sum"].source.startswith("def scaled_sum")
     assert graded_cells["q_why"].source == gradebook.MISSING_CELL  # no cell carries q_why's id any more
     assert all(c.metadata["nbgrader"]["grade"] and c.metadata["nbgrader"]["solution"] for c in graded_cells.values())
     text = "".join(c.source for c in placed.cells if c.cell_type == "markdown")

@@ -287,12 +287,13 @@ def formgrader_notebook(path: Path, result: GradeResult, stubs: dict[str, float]
     """The submitted notebook as formgrader should show it, and each written answer's state.
 
     Every cell keeps its source; outputs and all metadata but tags are dropped (the grader did not
-    run them, and they are the student's HTML); Markdown and raw cells are shown as text. The
-    cell the grader graded for each stub (matched as ``find_stubs`` matches it) and the cell of
-    each written answer (by ``grade_id``, the last one if several) carry nbgrader metadata, so
-    formgrader shows a score box there; one that is missing is added at the end, saying so.
-    A first cell lists the grader's notes on the submission. States: ``answered``,
-    ``unanswered`` (as released, or empty) or ``missing``.
+    run them, and they are the student's HTML); Markdown and raw cells become inert Markdown
+    (:func:`_inert`). The cell the grader graded for each stub (matched as ``find_stubs`` matches
+    it) and the cell of each written answer (by ``grade_id``, the last one if several) carry
+    nbgrader metadata, so formgrader shows a score box there; one that is missing, or a stub
+    sharing another stub's cell, gets a cell of its own at the end, saying so. A first cell
+    gives the automatic score and the grader's notes. States: ``answered``, ``unanswered`` (as
+    released, or empty) or ``missing``.
     """
     nb, _ = read_submission(path)
     matched, _ = find_stubs(nb, list(stubs))
@@ -313,7 +314,13 @@ def formgrader_notebook(path: Path, result: GradeResult, stubs: dict[str, float]
     cells.append(nbformat.v4.new_markdown_cell(
         f"**Automatic score: {result.score:g} / {result.max_score:g}** (the stubs' scores below come from "
         "the hidden tests; the written answers wait for yours)" + "".join(f"\n- note: {n}" for n in notes)))
-    where = {index: ("code", name) for name, index in stub_cell.items()}
+    where: dict[int, tuple[str, str]] = {}
+    shared = {}  # a stub defined in the cell of another: its score box gets a cell of its own
+    for name, index in stub_cell.items():
+        if index in where:
+            shared[name] = where[index][1]
+        else:
+            where[index] = ("code", name)
     where.update({index: ("markdown", gid) for gid, index in written_cell.items()})
     points = {**stubs, **{a.grade_id: a.points for a in written}}
     for index, cell in enumerate(nb.cells):
@@ -331,10 +338,14 @@ def formgrader_notebook(path: Path, result: GradeResult, stubs: dict[str, float]
             new.metadata["nbgrader"] = _graded(where[index][1], points[where[index][1]])
         cells.append(new)
     for name in stubs:
-        if name not in stub_cell:
+        if name in shared:
+            cell = nbformat.v4.new_code_cell(f"# `{name}` is defined in the cell of `{shared[name]}` above.")
+        elif name not in stub_cell:
             cell = nbformat.v4.new_code_cell(f"# No cell defining `{name}` was found in the submission.")
-            cell.metadata["nbgrader"] = _graded(name, stubs[name])
-            cells.append(cell)
+        else:
+            continue
+        cell.metadata["nbgrader"] = _graded(name, stubs[name])
+        cells.append(cell)
     states = {}
     for answer in written:
         if answer.grade_id not in written_cell:
