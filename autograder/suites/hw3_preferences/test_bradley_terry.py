@@ -32,6 +32,7 @@ def test_probability_complements_in_open_interval(student, rng):
     check_array(p + q if isinstance(p, np.ndarray) and isinstance(q, np.ndarray) else p, np.ones(50),
                 name="P(i>j) + P(j>i)")
     assert np.all((p > 0) & (p < 1)), "probabilities must lie strictly between 0 and 1 for moderate differences"
+    check_array(p, expit(a - b), rtol=1e-9, name="P(i > j) = sigmoid(r_i - r_j)")
 
 
 @stub("bt_probability", points=1, hint=P_HINT)

@@ -40,11 +40,14 @@ def test_segment_return_single_member_other_lengths(student, reference, rng):
 
 
 @stub("segment_return", points=1, hint=SR_HINT)
-def test_segment_return_is_differentiable(student, rng):
-    """The result keeps the autograd graph (no numpy, no detach)"""
+def test_segment_return_is_differentiable(student, reference, rng):
+    """The result keeps the autograd graph (no numpy, no detach), with the right values"""
     obs, act = _segments(rng, 3, 5)
     ok = student.eval(f"segment_return({ENSEMBLE}, obs, act).requires_grad", seed=0, obs=obs, act=act)
     assert ok is True, "the returned tensor does not require grad: compute it with torch operations only"
+    check_tensor(student.segment_return(student.eval(ENSEMBLE, seed=0), obs, act),
+                 reference.segment_return(reference.eval(ENSEMBLE, seed=0), obs, act), rtol=1e-5, atol=1e-5,
+                 name="the returns (the sum of the per-step rewards over time)")
 
 
 @stub("preference_loss", points=2, hint=PL_HINT)
@@ -204,3 +207,30 @@ def test_members_normalised_and_distinct(student):
     for a, b in ((0, 1), (0, 2), (1, 2)):
         assert np.abs(fresh[a] - fresh[b]).max() > 1e-3, \
             f"members {a} and {b} give the same rewards: each member has its own initialisation and bootstrap sample"
+    learned = _predict(ens, data["test_obs"], data["test_act"], 3).sum(-1).mean(0)
+    r = np.corrcoef(learned, data["test_returns"])[0, 1]
+    assert r > 0.25, ("after 50 steps on 300 labels the ensemble's returns should already follow the hidden reward "
+                      "(the reference: a correlation of about 0.5 on these held-out segments): are the members trained?")
+
+
+@stub("train_reward_model", points=1, hint="Draw each member's bootstrap from one generator created once, "
+      "np.random.default_rng(seed), before the loop over members: a generator created inside the loop gives every "
+      "member the same pairs.")
+def test_members_train_on_different_bootstraps(student):
+    """On 40 pairs of random labels each member memorises its own bootstrap: members must fit different pairs"""
+    rng = np.random.default_rng(91_733)
+    n_pairs, length = 40, 5
+    obs = torch.as_tensor(rng.normal(size=(2 * n_pairs, length, OBS_DIM)), dtype=torch.float32)
+    act = torch.as_tensor(rng.uniform(-1, 1, size=(2 * n_pairs, length, ACT_DIM)), dtype=torch.float32)
+    pairs, mu = np.arange(2 * n_pairs).reshape(n_pairs, 2), rng.integers(0, 2, n_pairs).astype(float)
+    ens = student.train_reward_model(obs, act, pairs, mu, n_members=3, n_steps=200, seed=4, timeout=120)
+    returns = _predict(ens, obs, act, 3).sum(-1)                                  # (3, 2 * n_pairs)
+    fit = (2 * mu - 1) * (returns[:, 0::2] - returns[:, 1::2])                   # > 0: the member agrees with the label
+    agree = (fit > 0).mean(axis=1)
+    assert agree.mean() >= 0.68, ("the members do not fit the labels they were trained on (the reference agrees with "
+                                  "about 80% of them, chance is 50%): are the members trained on the pairs?")
+    c = np.corrcoef(fit)
+    similarity = float(np.mean([c[0, 1], c[0, 2], c[1, 2]]))
+    assert similarity < 0.75, ("the members fit the same pairs, as if every member had drawn the same bootstrap sample "
+                               "(with independent bootstraps each leaves out about a third of the pairs, a different "
+                               "third for each member); draw them all from one generator")

@@ -66,6 +66,11 @@ def test_plays_through_the_environment(student, rng):
     unseen = sorted(set(range(len(P))) - set(pairs.ravel().tolist()))
     assert not unseen, (f"arms {unseen} were never played in 300 duels: with no duels yet every U is 1, so every "
                         "arm is a candidate and RUCB explores them all")
+    u = rng.permutation(np.array([1.5, 0.0, -0.2, -0.4]))          # one clearly best arm
+    easy, best = expit(u[:, None] - u[None, :]), int(np.argmax(u))
+    share = np.mean(_run(student, easy, 300, 1)[150:] == best)
+    assert share > 0.6, ("with one clearly best arm, the second half of 300 duels should mostly play it (the reference: "
+                         "over 90%; uniform pairs: 25%): are the candidates and the challenger chosen from U?")
 
 
 @stub("rucb", points=2, hint=HINT)

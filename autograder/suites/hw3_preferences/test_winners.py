@@ -35,6 +35,13 @@ def _is_int(x):
     return isinstance(x, (int, np.integer)) and not isinstance(x, bool)
 
 
+def _shown(x):
+    """A student's answer as plain text: 3, None, or its type (never numpy's repr, np.int64(3))."""
+    if x is None or _is_int(x):
+        return "None" if x is None else f"arm {int(x)}"
+    return f"a {type(x).__name__}"
+
+
 def _random_bt(rng, k):
     u = rng.normal(size=k)
     return expit(u[:, None] - u[None, :]), int(np.argmax(u))
@@ -46,18 +53,23 @@ def test_condorcet_exists(student, rng):
     for k in (3, 6, 9):
         P, best = _random_bt(rng, k)
         got = student.condorcet_winner(P)
-        assert _is_int(got), f"return an int arm index, got {got!r}"
-        assert got == best, f"on a {k}-arm instance the Condorcet winner is arm {best}, got {got}"
+        assert _is_int(got), f"return an int arm index, got {_shown(got)}"
+        assert got == best, (f"on a {k}-arm Bradley–Terry instance you returned {_shown(got)}, which does not beat "
+                             "every other arm with P > 1/2")
 
 
 @stub("condorcet_winner", points=1, hint=C_HINT)
 def test_condorcet_none(student, rng):
-    """No Condorcet winner: a cycle, the hand-made instance permuted, and an exact tie"""
+    """No Condorcet winner: a cycle, the hand-made instance permuted, and an exact tie; and one that has a winner"""
     cycle = _from_upper({(0, 1): .7, (1, 2): .7, (0, 2): .3}, 3)
     P, _ = _permuted(DIFFER, rng)
     for name, M in (("a 3-cycle", cycle), ("a 5-arm instance", P), ("an instance whose best arm ties one opponent", TIED)):
         got = student.condorcet_winner(M)
-        assert got is None, f"{name} has no Condorcet winner, got {got!r}"
+        assert got is None, f"{name} has no Condorcet winner, got {_shown(got)}"
+    P, best = _random_bt(rng, 4)
+    got = student.condorcet_winner(P)
+    assert _is_int(got) and got == best, (f"a 4-arm Bradley–Terry instance has a Condorcet winner; you returned "
+                                          f"{_shown(got)}")
 
 
 @stub("condorcet_winner", points=1, hint=C_HINT)
@@ -67,7 +79,9 @@ def test_condorcet_random_matches_reference(student, reference, rng):
         A = rng.random((5, 5))
         P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(5)
         want, got = reference.condorcet_winner(P), student.condorcet_winner(P)
-        assert got == want and (got is None) == (want is None), f"expected {want}, got {got!r} for P =\n{P.round(2)}"
+        assert got == want and (got is None) == (want is None), (
+            f"{_shown(got)} is wrong for P =\n{P.round(2)}\n"
+            + ("(this matrix has a Condorcet winner)" if want is not None else "(this matrix has none: return None)"))
 
 
 @stub("copeland_winner", points=2, hint=CO_HINT)
@@ -75,9 +89,10 @@ def test_copeland_hand_made(student, rng):
     """The instance where the three winners differ (permuted), and one with exact ties"""
     P, inv = _permuted(DIFFER, rng)
     got = student.copeland_winner(P)
-    assert _is_int(got) and got == inv[0], f"expected arm {inv[0]} (three wins), got {got!r}"
+    assert _is_int(got) and got == inv[0], (f"got {_shown(got)}, not the arm with the most strict wins "
+                                            "(count P[i, j] > 1/2 over the other arms j)")
     got = student.copeland_winner(COPELAND_TIES)
-    assert got == 1, f"only arm 1 beats two arms (P = 0.5 is not a win); expected 1, got {got!r}"
+    assert got == 1, f"got {_shown(got)}: P = 0.5 is not a win (count strict wins only)"
 
 
 @stub("copeland_winner", points=1, hint=CO_HINT)
@@ -87,7 +102,7 @@ def test_copeland_random_matches_reference(student, reference, rng):
         A = rng.random((6, 6))
         P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(6)
         want, got = reference.copeland_winner(P), student.copeland_winner(P)
-        assert got == want, f"expected {want}, got {got!r} for P =\n{P.round(2)}"
+        assert got == want, f"{_shown(got)} is not the arm with the most strict wins for P =\n{P.round(2)}"
 
 
 @stub("borda_winner", points=2, hint=B_HINT)
@@ -95,7 +110,8 @@ def test_borda_hand_made(student, rng):
     """The instance where the three winners differ (permuted)"""
     P, inv = _permuted(DIFFER, rng)
     got = student.borda_winner(P)
-    assert _is_int(got) and got == inv[1], f"expected arm {inv[1]} (mean win rate 0.70), got {got!r}"
+    assert _is_int(got) and got == inv[1], (f"got {_shown(got)}, not the arm with the highest mean P[i, j] over the "
+                                            "K - 1 other arms (the diagonal excluded)")
 
 
 @stub("borda_winner", points=1, hint=B_HINT)
@@ -105,4 +121,5 @@ def test_borda_random_matches_reference(student, reference, rng):
         A = rng.random((7, 7))
         P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(7)
         want, got = reference.borda_winner(P), student.borda_winner(P)
-        assert got == want, f"expected {want}, got {got!r} for P =\n{P.round(2)}"
+        assert got == want, (f"{_shown(got)} is not the arm with the highest mean P[i, j] over the other arms "
+                             f"(smallest index on ties) for P =\n{P.round(2)}")
