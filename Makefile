@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope formgrader bench site figures clean
+.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope formgrader mutants bench site figures clean
 
 $(STAMP): pyproject.toml lectures/requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -52,6 +52,11 @@ gradescope: setup
 formgrader: setup
 	PATH="$(abspath $(VENV))/bin:$$PATH" $(VENV)/bin/jupyter server --no-browser --ip=127.0.0.1 --port=8888 \
 		$$([ "$$(id -u)" = 0 ] && echo --allow-root)
+
+## Mutation testing of one assignment's hidden suite: make mutants ID=hw0_setup [ARGS="--max-per-stub 12"]
+mutants: setup
+	@test -n "$(ID)" || { echo "usage: make mutants ID=<assignment> [ARGS=...]"; exit 2; }
+	nice -n 10 $(PY) -m autograder mutants $(ID) $(ARGS)
 
 ## Every benchmark; each prints the table the README shows.
 bench: setup
