@@ -170,7 +170,9 @@ def laws(seeds: dict[str, dict]) -> dict:
 
     out: dict = {"best_of_n": {}, "rl": {}}
     for s, run in seeds.items():
-        bon = run["best_of_n"]
+        bon = run.get("best_of_n")
+        if bon is None:       # a seed stopped before its pool: no best-of-n law for it
+            continue
         n, kl, gold = np.array(bon["n"]), np.array(bon["kl_formula"]), np.array(bon["gold"])
         gain, d = gold - gold[0], np.sqrt(kl)
         fit = n <= BUDGET["FIT_MAX_N"]
@@ -180,6 +182,7 @@ def laws(seeds: dict[str, dict]) -> dict:
                                "n_star": G.n_for_kl(d_star ** 2),
                                "predicted": {int(k): float(G.bon_law(dk, a, b)) for k, dk in zip(n[~fit], d[~fit])},
                                "measured": {int(k): float(g) for k, g in zip(n[~fit], gain[~fit])}}
+    for s, run in seeds.items():
         sft_gold = run["methods"]["SFT"]["gold"]
         for method in [m for m in ("GRPO (proxy)", "PPO (proxy)", "GRPO (gold)", "PPO (gold)") if m in run["methods"]]:
             c = run["methods"][method]["curve"]
@@ -204,18 +207,21 @@ def ms(values, fmt="{:+.3f}") -> str:
 def print_tables(result: dict) -> None:
     seeds = result["seeds"]
     keys = sorted(seeds)
-    methods = list(seeds[keys[0]]["methods"])
+    methods = list(dict.fromkeys(m for s in keys for m in seeds[s]["methods"]))
     print(f"\n### Gold reward, proxy reward and KL from the SFT model ({len(keys)} seeds; mean ± sd over seeds; "
           f"{BUDGET['N_EVAL']} evaluation prompts; RL: {BUDGET['RL_ITERS']} iterations of "
           f"{BUDGET['RL_PROMPTS'] * BUDGET['RL_GROUP']} sampled sequences, no KL penalty)\n")
     print("| method | gold reward | proxy reward | KL (nats) | wall time (s) |")
     print("|---|---:|---:|---:|---:|")
     for m in methods:
-        col = lambda k: [seeds[s]["methods"][m][k] for s in keys]  # noqa: E731
+        col = lambda k: [seeds[s]["methods"][m][k] for s in keys if m in seeds[s]["methods"]]  # noqa: E731
         print(f"| {m} | {ms(col('gold'))} | {ms(col('proxy'))} | {ms(col('kl'), '{:.2f}')} | {ms(col('wall_s'), '{:.0f}')} |")
     rm_s = np.mean([seeds[s]["reward_model_s"] for s in keys])
     print(f"\nThe reward model took {rm_s:.0f} s to fit (not included above); PPO's wall time includes its value head.")
 
+    keys = [s for s in keys if "best_of_n" in seeds[s]]
+    if not keys:
+        return
     print("\n### Best-of-n from one pool (KL: formula and exact for the pool; gold gained over SFT)\n")
     bon0 = seeds[keys[0]]["best_of_n"]
     print("| n | KL formula | KL exact (proxy picks) | KL exact (gold picks) | gold (proxy picks) | gold (gold picks) |")
@@ -245,7 +251,7 @@ def print_tables(result: dict) -> None:
     print("| run | alpha | beta | predicted peak d* | measured peak at d | largest d | RMSE, second half | sd of the second half | last: predicted / measured |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for method, per in lw["rl"].items():
-        col = lambda k: [per[s][k] for s in keys]  # noqa: E731
+        col = lambda k: [per[s][k] for s in sorted(per)]  # noqa: E731
         print(f"| {method} | {ms(col('alpha'), '{:.3f}')} | {ms(col('beta'), '{:.3f}')} | "
               f"{', '.join(format(v, '.3g') for v in col('d_star'))} | {ms(col('measured_peak_d'), '{:.2f}')} | "
               f"{ms(col('max_d'), '{:.2f}')} | {ms(col('rmse_second_half'), '{:.3f}')} | {ms(col('sd_second_half'), '{:.3f}')} | "
@@ -260,8 +266,9 @@ def merge() -> dict:
         raise SystemExit("no per-seed results: run with --seed N first")
     result = {"budget": BUDGET, "command": "python bench/bench_hw6_group_rl.py", "seeds": seeds}
     result["laws"] = laws(seeds)
-    result["methods"] = {m: {s: {k: seeds[s]["methods"][m][k] for k in ("gold", "proxy", "kl", "wall_s")}
-                             for s in seeds} for m in seeds[next(iter(seeds))]["methods"]}
+    names = dict.fromkeys(m for run in seeds.values() for m in run["methods"])
+    result["methods"] = {m: {s: {k: run["methods"][m][k] for k in ("gold", "proxy", "kl", "wall_s")}
+                             for s, run in seeds.items() if m in run["methods"]} for m in names}
     (RESULTS / "hw6_group_rl.json").write_text(json.dumps(result, indent=1) + "\n")
     return result
 
