@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from autograder.suite import check_array, check_tensor, stub
+from rlcourse.nets import GaussianPolicy
 
 HINT = ("-log pi(a|s) = sum_j [ (a_j - mu_j)^2 / (2 sigma_j^2) + log sigma_j + 0.5 log(2 pi) ]; "
         "sum over action dimensions, average over the batch, return a 0-d tensor that keeps its graph.")
@@ -80,6 +81,12 @@ def test_gradient_matches_finite_differences(student, rng):
         fd_log_std.append((float(plus) - float(minus)) / (2 * eps))
     check_array(grads[0].numpy().astype(float), np.array(fd_log_std), rtol=2e-2, atol=2e-3,
                 name="the gradient with respect to log_std")
+    with torch.random.fork_rng():       # the same policy on the grader's side: d loss / d log_std_j = mean_i (1 - z_ij^2)
+        torch.manual_seed(4)
+        mean = GaussianPolicy(4, 3, hidden=(16, 16))(obs).detach()
+    z = (act - mean) / torch.exp(torch.as_tensor(log_std))
+    check_array(grads[0].numpy().astype(float), (1 - z**2).mean(0).numpy().astype(float), rtol=1e-3, atol=1e-4,
+                name="the gradient with respect to log_std (each entry is the batch mean of 1 - z^2, z = (a - mu) / sigma)")
     shift = "(p.mean.bias.data.add_(torch.as_tensor(d)), float(bc_loss(p, obs, act)))[1]"
     fd_bias = []
     for j in range(3):

@@ -85,32 +85,38 @@ def test_every_label_is_the_experts_action(student, in_sandbox):
     assert hist["obs"].ndim == 2 and hist["obs"].shape[1] == 4 and hist["actions"].shape == (len(hist["obs"]), 1), \
         f"the data set should be (N, 4) states and (N, 1) labels, got {hist['obs'].shape} and {hist['actions'].shape}"
     check_array(hist["obs"][:len(demo.obs)], demo.obs, rtol=0, atol=0, name="the first rows of the data set (the demonstrations)")
+    assert len(hist["obs"]) > len(demo.obs), "the data set holds only the demonstrations: add the states each iteration visits"
     check_array(hist["actions"], EXPERT.act(hist["obs"]), rtol=1e-5, atol=1e-6, name="the labels of the aggregated data set")
 
 
-@stub("dagger", points=2, hint="Iteration i uses beta_schedule[i]; with beta = 1 every action is the expert's.")
+@stub("dagger", points=2, hint=HINT)
 def test_follows_the_beta_schedule(student, in_sandbox):
     """Schedule [0, 1, 1]: iteration 0 drives the learner, iterations 1 and 2 are exactly the expert's seeded episodes"""
     seed, episodes = 2, 2
     _, hist = _run(in_sandbox, [0.0, 1.0, 1.0], episodes=episodes, seed=seed, policy_seed=3)
     learner = rollout(_initial_learner(3).act, racetrack.ENV_ID, episodes, seed=seed)
-    check_scalar(hist["returns"][0], float(learner.returns.mean()), rtol=1e-4, name="iteration 0's mean return (beta = 0)")
+    check_scalar(hist["returns"][0], float(learner.returns.mean()), rtol=1e-4,
+                 name="iteration 0's mean return (beta = beta_schedule[0] = 0: the learner drives)")
     sizes = [len(_demo().obs) + int(learner.lengths.sum())]
     for i in (1, 2):
         expert = rollout(EXPERT.act, racetrack.ENV_ID, episodes, seed=seed + i * episodes)
         check_scalar(hist["returns"][i], float(expert.returns.mean()), rtol=1e-4,
                      name=f"iteration {i}'s mean return (beta = 1: the expert's episodes seeded {seed + i * episodes}, ...)")
         sizes.append(sizes[-1] + int(expert.lengths.sum()))
-    check_array(hist["dataset_sizes"], np.array(sizes), rtol=0, atol=0, name="the data-set sizes after each iteration")
+    check_array(hist["dataset_sizes"], np.array(sizes), rtol=0, atol=0,
+                name="the data-set sizes after each iteration (only real steps count: padding after an episode ends is not a step)")
     assert len(hist["obs"]) == sizes[-1], "history['obs'] should be the whole aggregated data set"
 
 
 @stub("dagger", points=1, hint="Create one np.random.default_rng(seed) for the mixture and seed rollouts and training from `seed`.")
 def test_reproducible_under_a_seed(student, in_sandbox):
-    """Two runs with the same seed and initial learner give the same returns and data set"""
+    """Two runs with the same seed and initial learner give the same returns and data set; another seed another run"""
     (_, first), (_, second) = (_run(in_sandbox, [0.5, 0.5], episodes=2, seed=7, policy_seed=4) for _ in range(2))
     check_array(second["returns"], first["returns"], rtol=0, atol=0, name="the returns of the second run")
     check_array(second["obs"], first["obs"], rtol=0, atol=0, name="the data set of the second run")
+    _, other = _run(in_sandbox, [0.5, 0.5], episodes=2, seed=8, policy_seed=4)
+    assert other["obs"].shape != first["obs"].shape or not np.array_equal(other["obs"], first["obs"]), \
+        "a different seed gave the same data set: seed the rollouts and the mixture from `seed`"
 
 
 @stub("dagger", points=2, hint=HINT)

@@ -53,3 +53,6 @@ def test_empty_batch(student):
     """No states: an empty (0, act_dim) array"""
     got = student.eval(f"relabel_with_expert({HOPPER}, obs)", obs=np.zeros((0, 11), dtype=np.float32))
     check_array(got, np.zeros((0, 3), dtype=np.float32), name="the labels of an empty batch")
+    got = student.eval("relabel_with_expert(racetrack.Expert(), obs)", obs=np.zeros((0, racetrack.OBS_DIM), dtype=np.float32))
+    check_array(got, np.zeros((0, 1), dtype=np.float32),
+                name="the race-track expert's labels of an empty batch (its actions have 1 dimension, not 3)")

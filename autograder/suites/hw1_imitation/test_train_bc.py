@@ -62,13 +62,15 @@ def test_recovers_a_linear_gaussian_expert(student, trusted_copy, rng):
 
 
 @stub("train_bc", points=1, hint=HINT)
-def test_history_has_one_finite_entry_per_epoch(student, rng):
-    """One training and one validation loss per epoch, finite, and falling"""
+def test_history_has_one_finite_entry_per_epoch(student, trusted_copy, rng):
+    """One training and one validation loss per epoch, finite, and falling, as the policy's loss does"""
     _, _, _, obs, actions = _linear_expert(rng, 600)
-    _, hist = _train(student, obs, actions, hidden=(8,), n_epochs=7, batch_size=50, lr=1e-2, seed=1)
+    policy, hist = _train(student, obs, actions, hidden=(8,), n_epochs=7, batch_size=50, lr=1e-2, seed=1)
     train, val = _history(hist, 7)
     assert np.isfinite(train).all() and np.isfinite(val).all(), "the losses should be finite numbers"
     assert train[-1] < train[0] and val[-1] < val[0], "both losses should fall over the epochs"
+    before, after = _mean_nll(_initial_policy(3, 2, (8,)), obs, actions), _mean_nll(trusted_copy(policy), obs, actions)
+    assert after < before, "the policy's loss on the data did not fall: train the policy in place (the history alone is not enough)"
 
 
 @stub("train_bc", points=1, hint="Draw the split and every shuffle from np.random.default_rng(seed), so a seed fixes the run.")
