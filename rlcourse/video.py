@@ -21,10 +21,12 @@ EGL_PACKAGES = ["libegl1", "libegl-mesa0", "libgl1-mesa-dri", "libgles2"]
 
 
 def render_rollout(policy: Callable[[np.ndarray], np.ndarray], env_id: str, seed: int = 0,
-                   seconds: float = 3.0, size: int = 240, fps: int = 25) -> np.ndarray:
+                   seconds: float = 3.0, size: int = 240, fps: int = 25, past_the_end: bool = False) -> np.ndarray:
     """Frames ``(n, size, size, 3)`` uint8 of one seeded episode of ``policy``, at most ``seconds`` long.
 
     ``policy`` maps one observation ``(obs_dim,)`` batch ``(1, obs_dim)`` to actions ``(1, act_dim)``.
+    The clip stops where the episode ends, unless ``past_the_end``: then the simulator keeps running
+    for the whole ``seconds`` (a hopper whose episode ends as it tips over is seen landing).
     """
     env = gym.make(env_id, render_mode="rgb_array", width=size, height=size)
     obs, _ = env.reset(seed=seed)
@@ -35,7 +37,7 @@ def render_rollout(policy: Callable[[np.ndarray], np.ndarray], env_id: str, seed
         obs, _, terminated, truncated, _ = env.step(action)
         if (t + 1) % skip == 0:
             frames.append(env.render())
-        if terminated or truncated:
+        if (terminated or truncated) and not past_the_end:
             break
     env.close()
     return np.stack(frames)
