@@ -1,5 +1,6 @@
 """Hidden tests of soft_value_iteration."""
 import numpy as np
+from scipy.special import logsumexp
 
 from autograder.suite import check_array, stub
 from rlcourse.gridworld import random_mdp
@@ -39,6 +40,11 @@ def test_distributions_and_last_step(student, rng):
     closed = np.exp(logits - logits.max(axis=1, keepdims=True))
     check_array(pi[-2], closed / closed.sum(axis=1, keepdims=True), rtol=1e-6, atol=1e-9,
                 name="pi at t = T-2 (one step of look-ahead: softmax over a of sum_s' P(s'|s,a) r(s'))")
+    # Two soft backups by hand: a hard max in place of the log-sum-exp first differs here.
+    v = logsumexp(reward[:, None] + m.P @ (reward + np.log(m.n_actions)), axis=1)      # V at t = T-2
+    q = reward[:, None] + m.P @ v
+    check_array(pi[-3], np.exp(q - logsumexp(q, axis=1, keepdims=True)), rtol=1e-6, atol=1e-9,
+                name="pi at t = T-3 (two backups: V(s) is the log-sum-exp of Q(s, .), not its max)")
 
 
 @stub("soft_value_iteration", points=1, hint=HINT)
