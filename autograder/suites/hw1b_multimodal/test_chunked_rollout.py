@@ -131,15 +131,16 @@ def test_records_the_episodes_exactly(student, rng):
 
 
 @stub("chunked_rollout", points=2, hint="An episode may end in the middle of a chunk: it stops there (mask False "
-      "afterwards) while the others go on executing the same chunk; stop stepping when every episode has ended.")
+      "afterwards) while the others go on executing the same chunk; stop stepping when every episode has ended. "
+      "A chunk of exactly `execute` actions is valid.")
 def test_episodes_that_end_inside_a_chunk(student, rng):
-    """Scripted episodes of hidden lengths ending inside chunks: right lengths, flags and no extra steps"""
+    """Scripted episodes of hidden lengths ending inside chunks of exactly k actions: right lengths, flags, no extra steps"""
     n, execute = 4, 4
     lengths = rng.choice(np.arange(2, 15), size=n, replace=False)
     lengths[0] = execute * int(rng.integers(1, 3)) + int(rng.integers(1, execute))   # inside a chunk, not at its end
     flags = rng.random(n) < 0.5
     base = rng.normal(size=(n, 3))
-    weights, bias = _planner(rng, 6, 3)
+    weights, bias = _planner(rng, execute, 3)                          # chunks of exactly `execute` actions
     rec, ep, rows = _run(student, Scripted(lengths, flags, base), weights, bias, execute)
     T = int(lengths.max())
     assert len(rec.actions) == T, (f"the longest episode lasts {T} steps, so env.step should be called {T} times; "
