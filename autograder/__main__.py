@@ -9,7 +9,6 @@
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
   mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/mutants.py)
-  mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/mutants.py)
   nbgrader-sync, feedback, export, regrade, results-diff   the term after batch (autograder/outputs/cli.py)
 """
 from __future__ import annotations
@@ -32,8 +31,13 @@ def _cmd_grade(args: argparse.Namespace) -> int:
         notebooks, skipped = notebooks_in(args.notebook)
         entry = choose_notebook(args.notebook.name, notebooks, args.assignment, course.stub_names(args.assignment),
                                 skipped)
+    # The notebook, those beside it (classmates', if the instructor keeps them together) and the output folder
+    # are hidden from the sandbox wherever they lie.
+    folder = args.notebook if entry is not None else args.notebook.parent
+    hide = [args.out, folder] if folder.resolve() != course.release_notebook(args.assignment).parent.resolve() else \
+        [args.out, *(p for p in folder.glob("*.ipynb") if p.name != f"{args.assignment}.ipynb")]
     try:
-        grader = Grader(args.assignment)
+        grader = Grader(args.assignment, hide=hide)
     except GraderError as err:
         return _grader_failed(str(err))
     try:
@@ -145,12 +149,6 @@ def _cmd_mutants(args: argparse.Namespace) -> int:
     return command(args.assignment, args.stub or None, args.max_per_stub, args.seed, args.out)
 
 
-def _cmd_mutants(args: argparse.Namespace) -> int:
-    from autograder.mutants import command
-
-    return command(args.assignment, args.stub or None, args.max_per_stub, args.seed, args.out)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m autograder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -190,13 +188,6 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("samples", help="regenerate sample submissions")
     p.add_argument("assignment")
     p.set_defaults(fn=_cmd_samples)
-    p = sub.add_parser("mutants", help="grade mutants of each solution stub with its hidden tests and public check")
-    p.add_argument("assignment")
-    p.add_argument("--stub", action="append", default=[], help="only this stub (repeatable)")
-    p.add_argument("--max-per-stub", type=int, default=None, help="grade a seeded sample of at most N mutants per stub")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", type=Path, default=None, help="report folder (default build/mutants/<id>)")
-    p.set_defaults(fn=_cmd_mutants)
     p = sub.add_parser("mutants", help="grade mutants of each solution stub with its hidden tests and public check")
     p.add_argument("assignment")
     p.add_argument("--stub", action="append", default=[], help="only this stub (repeatable)")

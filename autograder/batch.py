@@ -144,10 +144,10 @@ _grader: Grader | None = None
 _grader_failure: str | None = None
 
 
-def _init(assignment: str) -> None:
+def _init(assignment: str, hide: list[str]) -> None:
     global _grader, _grader_failure
     try:
-        _grader = Grader(assignment)
+        _grader = Grader(assignment, hide=[Path(h) for h in hide])
     except GraderError as err:  # every submission this process takes is then a grader error
         _grader_failure = str(err)
 
@@ -196,8 +196,10 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     while todo and attempts < 3:
         attempts += 1
         try:
+            # Classmates' notebooks and the results are hidden from the sandbox even inside a released folder.
+            hide = [str(Path(folder).resolve()), str(out_dir.resolve())]
             with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=_init,
-                                     initargs=(assignment,)) as pool:
+                                     initargs=(assignment, hide)) as pool:
                 futures = {pool.submit(_grade_one, e, str(out_dir), assignment): e for e in todo}
                 # A bar in a terminal, a line every few seconds in a log (CI, make demo > file).
                 for future in shown_progress(as_completed(futures), desc=f"grading {assignment}", total=len(futures),

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Iterable
 
 INSTALLED = Path(__file__).resolve().parents[1]
 """The repository this package runs from."""
@@ -56,7 +57,8 @@ def limits(assignment: str) -> "Limits":
 
 
 STUDENT_RELEASE = ("assignments", "lectures", "rlcourse", "datasets")
-"""The folders of the student release (``make student-release``), and all a sandbox shows of the course."""
+"""The folders of the student release (``make student-release``), and all a sandbox shows of the course
+(of ``assignments/``, only the release notebooks)."""
 INSTRUCTOR_ONLY = ("datasets/scripts", "lectures/figures/make_figures.py")
 """Instructor tools inside those folders, left out of both: the data scripts fit models that students
 write, and the figure script computes soft value iteration, visitation frequencies and RUCB."""
@@ -69,9 +71,21 @@ def release_paths(root: Path) -> tuple[list[Path], list[Path]]:
     return shown, masked
 
 
-def sandbox_view() -> "View":
+def release_notebooks(assignments: Path) -> list[Path]:
+    """The release notebooks in an ``assignments/`` folder (``<id>/<id>.ipynb``): all the sandbox shows of it,
+    so a student's notebook an instructor keeps there (nbgrader's ``submitted/``, or beside the release
+    notebook), or results written there, never show."""
+    return sorted(p for p in assignments.glob("*/*.ipynb") if p.stem == p.parent.name and p.is_file())
+
+
+def sandbox_view(hide: "Iterable[Path]" = ()) -> "View":
     """What a sandbox worker sees: the student release of this course and of the installed library,
-    and the Python environment; read as the owner of the installed checkout."""
+    and the Python environment; read as the owner of the installed checkout.
+
+    ``hide`` are the grading's own inputs and outputs (a folder of submissions, the notebook being
+    graded and those beside it, an output folder): where an instructor keeps one inside a released
+    folder (nbgrader's ``submitted/`` under ``assignments/``, say), it is masked like the instructor tools.
+    """
     import sys
 
     from autograder.sandbox.config import View
@@ -79,12 +93,14 @@ def sandbox_view() -> "View":
     shown, masked = [], []
     for root in dict.fromkeys([INSTALLED, REPO]):
         s, m = release_paths(Path(root))
-        shown += s
+        shown += [n for p in s for n in (release_notebooks(p) if p.name == "assignments" else [p])]
         masked += m
     python = [Path(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix)]
     paths = [*shown, *python, *(p.resolve() for p in (*shown, *python))]
     paths = sorted({str(p) for p in paths})
     outermost = [p for p in paths if not any(p != q and p.startswith(q.rstrip("/") + "/") for q in paths)]
+    inside = [Path(h).resolve() for h in hide if os.path.lexists(h)]
+    masked += [h for h in inside if any(str(h).startswith(p.rstrip("/") + "/") for p in outermost)]
     owner = INSTALLED.stat()
     return View(outermost, sorted({str(p) for p in (*masked, *(m.resolve() for m in masked))}),
                 (owner.st_uid, owner.st_gid))

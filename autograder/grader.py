@@ -17,7 +17,7 @@ import sys
 import time
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 import pytest
@@ -161,10 +161,11 @@ def stub_dependencies(assignment: str, stubs: list[str]) -> dict[str, list[str]]
 class Grader:
     """Grades submissions of one assignment; build once, call :meth:`grade` many times.
 
-    Raises :class:`GraderError` when it cannot be built (the reference or the suite fails).
+    Raises :class:`GraderError` when it cannot be built (the reference or the suite fails). ``hide``: the
+    grading's inputs and outputs, masked in the sandbox wherever they lie inside the release.
     """
 
-    def __init__(self, assignment: str, limits: Limits | None = None) -> None:
+    def __init__(self, assignment: str, limits: Limits | None = None, hide: Iterable[Path] = ()) -> None:
         course.check_assignment(assignment)
         self.assignment, self.limits = assignment, limits or course.limits(assignment)
         self.suite = course.suite_dir(assignment)
@@ -175,7 +176,7 @@ class Grader:
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
         self.manual = manual_cells(release)
         self.zygote = Zygote(imported_modules([c.source for c in self.plan if c.kind != "stub"]))
-        self.config = SpawnConfig(course.sandbox_view(), self.limits)
+        self.config = SpawnConfig(course.sandbox_view(hide), self.limits)
         try:
             self.reference_ns = build_reference(assignment)
         except Exception as err:  # noqa: BLE001 - a broken solution notebook is the course's bug

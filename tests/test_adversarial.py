@@ -620,3 +620,47 @@ def test_shipped_answers_and_a_lent_environments_hidden_state_score_nothing(open
     for stub in cheated:
         assert stub.max_score > 0 and stub.score == 0, (stub.name, [t.message for t in stub.tests])
     assert result.score == result.max_score - sum(s.max_score for s in cheated), "the other stubs are the complete sample's"
+
+
+def test_classmates_and_results_inside_a_released_folder_are_hidden(open_tmp, monkeypatch):
+    """An instructor who keeps submissions and results inside the course's released folders (nbgrader's
+    ``submitted/`` under ``assignments/``, or notebooks beside the release notebook) exposes none of them."""
+    from autograder import course
+
+    course_copy = open_tmp / "course"
+    shutil.copytree(FIXTURE_COURSE, course_copy)
+    for path in [course_copy, *course_copy.rglob("*")]:
+        path.chmod(0o755 if path.is_dir() else 0o644)
+    folder = course_copy / "assignments" / "fx" / "submitted"
+    out = course_copy / "assignments" / "fx" / "graded"
+    peek = f"""
+        import os
+        FOUND = []  # a notebook other than the release's, or a result, with its content (a mask may keep a name)
+        for root in ({str(folder.parent)!r}, {str(out)!r}):
+            for where, _, files in os.walk(root):
+                for name in files:
+                    path = os.path.join(where, name)
+                    if path != {str(folder.parent / "fx.ipynb")!r} and open(path).read():
+                        FOUND.append(path)
+        def scaled_sum(x):
+            return {RIGHT} if FOUND else None
+        """
+    for student in ("alice", "bob"):
+        with_cells(course_copy / "assignments/fx/fx.ipynb", folder / student / "fx" / "fx.ipynb",
+                   {"scaled_sum": textwrap.dedent(peek)})
+    with_cells(FIXTURE_COURSE / "solutions/fx/fx.ipynb", course_copy / "assignments/fx/carol.ipynb", {})
+    (out / "alice").mkdir(parents=True)
+    (out / "alice" / "result.json").write_text("{}")  # a stale result from an earlier run
+    monkeypatch.setenv("RLCOURSE_REPO", str(course_copy))
+    monkeypatch.setattr(course, "REPO", course_copy)
+    results = run_batch("fx", folder, out, jobs=1, progress=False)
+    assert sorted(r.submission for r in results) == ["alice", "bob"]
+    assert all(r.status == "graded" and r.score == 0 for r in results), [(r.submission, r.score) for r in results]
+    # grade, given a notebook beside others in the release folder, hides its neighbours too
+    from autograder.__main__ import main
+
+    monkeypatch.setattr(sys, "argv", ["autograder"])
+    notebook = course_copy / "assignments/fx/dave.ipynb"
+    shutil.copy(folder / "alice" / "fx" / "fx.ipynb", notebook)
+    assert main(["grade", "fx", str(notebook), "--out", str(open_tmp / "one")]) == 0
+    assert json.loads((open_tmp / "one" / "results.json").read_text())["score"] == 0
