@@ -104,9 +104,9 @@ def test_runs_each_action_of_the_latest_chunk(student, rng):
     check_array(np.where(live, sent, 0.0), np.where(live, want, 0.0), rtol=1e-5, atol=1e-5,
                 name=f"the actions sent to env.step (execute={execute}), step by step")
     calls = -(-len(rec.actions) // execute)
-    assert rows == [n] * calls, (f"plan should be called once every {execute} steps on all {n} observations: "
-                                 f"{calls} calls for {len(rec.actions)} steps; it was called {len(rows)} times with "
-                                 f"{sorted(set(rows))} rows")
+    assert rows == [n] * calls, (f"plan should be called once every {execute} steps (at steps 0, {execute}, ...) on all "
+                                 f"{n} observations; for the {len(rec.actions)} steps your run took, it was called "
+                                 f"{len(rows)} times with {sorted(set(rows))} rows")
 
 
 @stub("chunked_rollout", points=2, hint=HINT)
@@ -143,15 +143,17 @@ def test_episodes_that_end_inside_a_chunk(student, rng):
     weights, bias = _planner(rng, execute, 3)                          # chunks of exactly `execute` actions
     rec, ep, rows = _run(student, Scripted(lengths, flags, base), weights, bias, execute)
     T = int(lengths.max())
-    assert len(rec.actions) == T, (f"the longest episode lasts {T} steps, so env.step should be called {T} times; "
-                                   f"it was called {len(rec.actions)} times")
+    assert len(rec.actions) == T, ("env.step should be called until the longest episode has ended and then no more "
+                                   f"(it was called {len(rec.actions)} times, "
+                                   f"{'too few' if len(rec.actions) < T else 'too many'})")
     check_array(ep["lengths"], lengths, name="the lengths")
     check_array(ep["terminated"].astype(bool), flags, name="terminated (True only for episodes ended by terminated)")
     check_array(ep["mask"].astype(bool), np.arange(T)[None, :] < lengths[:, None], name="the mask")
     want = _expected(rec, weights, bias, execute)
     check_array(np.stack(rec.actions)[:, 0], want[:, 0], rtol=1e-5, atol=1e-5,
                 name="the actions of the longest-running episodes after another one ended")
-    assert rows == [n] * (-(-T // execute)), f"plan should be called on all {n} episodes every {execute} steps, got {rows}"
+    assert rows == [n] * (-(-T // execute)), \
+        f"plan should be called on all {n} episodes once every {execute} steps; it was called with {rows} rows"
 
 
 @stub("chunked_rollout", points=1, hint="With execute = 1 a chunked policy is an ordinary policy: plan at every step and run chunk[:, 0].")
