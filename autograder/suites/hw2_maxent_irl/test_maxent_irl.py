@@ -73,6 +73,24 @@ def test_history_starts_at_zero_weights(student, reference):
                 name="the first log-likelihood (uniform policy: -T log A)")
 
 
+@stub("maxent_irl", points=1, hint="The step is along u = g / (v + 1), v the per-feature variance over the demonstrations "
+                                   "of the summed features; the first step is lr, then x1.1 after an accepted step and "
+                                   "x0.5 after a rejected one (w unchanged).")
+def test_history_follows_the_documented_steps(student, reference):
+    """The first three gradient norms are those of the documented adaptive steps from w = 0"""
+    m, _, demos = _problem(reference, 6, 80)
+    args = (m.P, m.features, m.p0, demos.states, m.horizon, demos.actions)
+    _, hist = student.maxent_irl(*args, lr=0.5, n_iters=3, tol=0.0)
+    _, want = reference.maxent_irl(*args, lr=0.5, n_iters=3, tol=0.0)
+    got = np.asarray(hist["grad_norm"], dtype=float) if isinstance(hist, dict) and "grad_norm" in hist else np.zeros(0)
+    assert got.shape == (3,), f"with n_iters = 3 and tol = 0 the history should hold 3 gradient norms, got {got.shape[0]}"
+    for k in (1, 2):
+        if not np.isclose(got[k], want["grad_norm"][k], rtol=1e-5, atol=1e-9):
+            assert False, (f"history['grad_norm'][{k}] is not where the documented step rule leads "
+                           f"({'too large' if got[k] > want['grad_norm'][k] else 'too small'}): check the scale "
+                           "1 / (v + 1), the first step lr, and the x1.1 / x0.5 updates")
+
+
 @stub("maxent_irl", points=1, hint=HINT)
 def test_log_likelihood_rises(student, reference):
     """The recorded log-likelihood rises, and the returned weights meet the stopping rule |g| <= tol |mu_D|"""
