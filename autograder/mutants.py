@@ -294,7 +294,9 @@ def run_public_checks(assignment: str, mutants_by_stub: dict[str, list[Mutant]],
     cells, _ = _notebook_parts(assignment)
     namespace: dict = {}
     out: dict[tuple[str, str], str | None] = {}
-    for kind, source in cells:
+    wanted = {f"check:{stub}" for stub, mutants in mutants_by_stub.items() if mutants}
+    last = max((i for i, (kind, _) in enumerate(cells) if kind in wanted), default=-1)
+    for kind, source in cells[:last + 1]:       # nothing after the last check that is needed
         if kind.startswith("check:"):
             stub = kind.split(":", 1)[1]
             mutants = mutants_by_stub.get(stub, [])
