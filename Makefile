@@ -12,6 +12,11 @@ $(STAMP): pyproject.toml lectures/requirements.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e . -r lectures/requirements.txt
 	$(PY) -m rlcourse.video
+	@# Chromium for tests/test_browser.py (the notebooks in JupyterLab): installed as root, else the test says it skips.
+	@if [ "$$(id -u)" = 0 ] && ! command -v chromium >/dev/null && command -v apt-get >/dev/null; then \
+		echo "installing chromium for the browser tests"; \
+		DEBIAN_FRONTEND=noninteractive apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium \
+			|| echo "could not install chromium: tests/test_browser.py will skip"; fi
 	touch $(STAMP)
 
 setup: $(STAMP)
