@@ -259,6 +259,8 @@ def test_hw0_in_jupyterlab_runs_its_first_cells_typesets_math_and_plays_its_clip
         lab.wait_js("the first public check to run (and stop Run All)",
                     f"{CELLS}[{first_check}].model.executionCount !== null", 120)
         assert _cell_errors(lab, first_check) == [], "a cell before the first stub's check raised"
+        assert lab.js(f"{CELLS}.slice(0, {first_check}).every(c => c.model.type !== 'code' || c.model.executionCount)"), \
+            "a code cell before the first stub's check did not run"
         assert lab.js(f"{CELLS}[{first_check}].model.toJSON().outputs.some(o => o.ename === 'NotImplementedError')"), \
             "the first check should stop at the unfinished stub"
         math = _math_is_typeset(lab)
