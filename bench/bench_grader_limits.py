@@ -34,8 +34,10 @@ try:
     result = grader.grade(sys.argv[1])
 finally:
     grader.close()
+failures = [t.message for s in result.stubs for t in s.tests if not t.passed and "not implemented" not in t.message]
 print(json.dumps({"status": result.status, "score": result.score, "seconds": time.monotonic() - start,
-                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "why": (failures or [result.error or ""])[0][:200]}))
 """
 MEMORY_RATIO = 2.0
 """The grader's peak memory on any submission, as a multiple of the untouched notebook's."""
@@ -83,7 +85,11 @@ def write_corpus(folder: Path) -> tuple[Path, dict[str, Path | None]]:
     _hostile_files(submissions, folder)
     port.close()
     untouched = with_cells(FIXTURE_COURSE / "assignments/fx/fx.ipynb", folder / "untouched.ipynb", {})
-    entries = discover(submissions, "fx", course.stub_names("fx"))
+    repo, course.REPO = course.REPO, FIXTURE_COURSE  # already imported (under pytest, say): point it at fx
+    try:
+        entries = discover(submissions, "fx", course.stub_names("fx"))
+    finally:
+        course.REPO = repo
     return untouched, {e.name: e.notebook for e in entries}
 
 

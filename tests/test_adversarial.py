@@ -30,6 +30,15 @@ from conftest import FIXTURE_COURSE, REPO, with_cells
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
 RIGHT = "SCALE * np.asarray(x, dtype=float).sum(axis=-1)"
+CHANNEL = """def _channel():
+    \"\"\"The worker's end of the channel to the grader: its one write-only descriptor past stderr.\"\"\"
+    for fd in sorted(map(int, os.listdir("/proc/self/fd"))):
+        try:
+            if fd > 2 and fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_WRONLY:
+                return fd
+        except OSError:
+            pass
+"""
 
 CASES = {
     "always_equal": """
@@ -329,13 +338,7 @@ CASES = {
             """},
     "reply_that_inflates": """
         import fcntl, os, struct, time
-        def _channel():
-            for fd in sorted(map(int, os.listdir("/proc/self/fd"))):
-                try:
-                    if fd > 2 and fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_WRONLY:
-                        return fd
-                except OSError:
-                    pass
+        {CHANNEL}
         def scaled_sum(x):
             body = b'{"ok": true, "nblobs": 0, "value": [' + b"[]," * 80_000_000 + b"[]]}"
             os.write(_channel(), struct.pack(">I", len(body)) + body)  # 240 MB of JSON, 80 million lists once parsed
@@ -343,13 +346,7 @@ CASES = {
         """,
     "many_maximal_blobs": """
         import fcntl, json, os, struct, time
-        def _channel():
-            for fd in sorted(map(int, os.listdir("/proc/self/fd"))):
-                try:
-                    if fd > 2 and fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE == os.O_WRONLY:
-                        return fd
-                except OSError:
-                    pass
+        {CHANNEL}
         def scaled_sum(x):
             fd = _channel()
             head = json.dumps({"ok": True, "value": None, "nblobs": 9999}).encode()
@@ -382,6 +379,7 @@ def _case_source(code: str, port: int, tmp: Path) -> str:
               f"SUBMISSIONS = {str(tmp / 'submissions')!r}\nCOPY = {str(tmp / 'copy')!r}\n"
               f"COURSE_CODE = {str(REPO)!r}\n")
     body = textwrap.dedent(code).replace("{RIGHT}", RIGHT).replace("{course}", str(FIXTURE_COURSE))
+    body = body.replace("{CHANNEL}", CHANNEL)
     return header + body
 
 

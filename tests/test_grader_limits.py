@@ -35,3 +35,9 @@ def test_grader_memory_and_time_stay_bounded_on_hostile_submissions():
         assert row["within_memory"], f"{name}: the grader peaked at {row['memory_ratio']:.2f}x the untouched notebook's memory"
         assert row["within_time"], f"{name}: grading took {row['seconds']} s, over {bench.wall_bound():.0f} s"
         assert not row["score"], f"{name} scored {row['score']}"
+    # each attack reached the grader (a case that failed for another reason would prove nothing)
+    for name, why in {"reply_that_inflates": "header of 240000040 bytes is over the limit",
+                      "many_maximal_blobs": "over the limit", "huge_return_value": "over the limit",
+                      "worker_stops_reading": "timed out", "calls_back_for_ever": "timed out",
+                      "json_that_inflates": "needs more than"}.items():
+        assert why in rows[name]["why"], (name, rows[name]["why"])
