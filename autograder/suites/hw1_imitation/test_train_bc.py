@@ -107,15 +107,15 @@ def test_small_float64_data_and_inputs_untouched(student, trusted_copy, rng):
                                  "minibatches: sum loss * len(batch) over the epoch, divide by the number of training pairs.")
 def test_reported_training_loss_is_the_epoch_mean(student, rng):
     """With lr = 0 the policy never moves, so the reported training and held-out losses must make up the loss of all pairs"""
-    for n, batch_size in ((50, 10), (10, 256)):
+    for n, batch_size, fraction in ((50, 10, 0.2), (10, 256, 0.2), (2, 256, 0.5)):
         _, _, _, obs, actions = _linear_expert(rng, n)
         _, hist = _train(student, obs, actions, hidden=(8,), n_epochs=2, batch_size=batch_size, lr=0.0, seed=3,
-                         val_fraction=0.2)
+                         val_fraction=fraction)
         train, val = _history(hist, 2)
-        n_val = round(0.2 * n)
+        n_val = round(fraction * n)
         whole = _mean_nll(_initial_policy(3, 2, (8,)), obs, actions)
         implied = (n * whole - n_val * val) / (n - n_val)   # the training-pairs' mean loss the held-out loss implies
-        where = f"{n} pairs, batch_size {batch_size}"
+        where = f"{n} pairs, val_fraction {fraction}, batch_size {batch_size}"
         assert np.isfinite(val).all(), f"the held-out losses should be finite numbers ({where})"
         for e in range(2):
             if not np.isclose(train[e], implied[e], rtol=1e-4, atol=1e-4):
