@@ -46,6 +46,14 @@ def test_shapes_and_history(student, reference):
         f"the reward should be a numpy array of shape (S,) = ({world.n_states},), got {type(reward).__name__} {np.shape(reward)}"
     assert len(hist["grad_norm"]) == 5 and len(hist["log_likelihood"]) == 5, "record one value per iteration"
     assert np.std(reward) > 1e-6, "the reward is the same in every state: return the trained network evaluated on every state"
+    far = world.n_states - 1                          # demonstrations that never visit the last state
+    keep = ~(demos.states >= far).any(axis=1)
+    assert keep.sum() >= 10, "test set-up: enough trajectories avoid the last state"
+    partial, _ = student.deep_maxent_irl(world.P, world.features, world.p0, demos.states[keep], world.horizon,
+                                         demos.actions[keep], n_iters=2)
+    assert isinstance(partial, np.ndarray) and partial.shape == (world.n_states,), (
+        "with demonstrations that never visit the last state the reward should still cover all S states: count "
+        "visits with np.bincount(..., minlength=S), S = P.shape[0]")
     want, _ = reference.deep_maxent_irl(world.P, world.features, world.p0, demos.states, world.horizon, demos.actions,
                                         n_iters=5)
     r = np.corrcoef(reward, want)[0, 1]
