@@ -94,6 +94,9 @@ def test_learns_as_well_as_reference(student, reference):
     world, demos = _world()
     args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
     got, hist = student.deep_maxent_irl(*args, n_iters=150)
+    got = np.asarray(got, dtype=float) if isinstance(got, np.ndarray) else got
+    assert isinstance(got, np.ndarray) and got.shape == (world.n_states,) and np.isfinite(got).all(), (
+        f"the reward should be a finite numpy array of shape (S,) = ({world.n_states},), got {np.shape(got)}")  # before the reference sees it
     want, _ = reference.deep_maxent_irl(*args, n_iters=150)
     gap_got, gap_want = _ratio(reference, world, got), _ratio(reference, world, want)
     short = gap_want - gap_got

@@ -52,6 +52,8 @@ def test_return_of_learned_policy(student, reference):
     m, expert, demos = _problem(reference, 3, 4000)
     m = dataclasses.replace(m, true_reward=m.true_reward - m.true_reward.min())  # positive returns
     w, _ = student.maxent_irl(m.P, m.features, m.p0, demos.states, m.horizon, demos.actions, n_iters=2000, tol=1e-5)
+    assert np.shape(w) == (3,) and np.isfinite(np.asarray(w, dtype=float)).all(), \
+        f"the weights should be 3 finite numbers, shape (F,) = (3,), got shape {np.shape(w)}"
     learned = _expected_return(reference, m, _model_features(reference, m, w)[1])
     target = _expected_return(reference, m, expert)
     assert learned >= 0.98 * target, (f"the learned reward's soft policy earns about {100 * learned / target:.0f}% of the "
