@@ -123,3 +123,6 @@ def test_borda_random_matches_reference(student, reference, rng):
         want, got = reference.borda_winner(P), student.borda_winner(P)
         assert got == want, (f"{_shown(got)} is not the arm with the highest mean P[i, j] over the other arms "
                              f"(smallest index on ties) for P =\n{P.round(2)}")
+    two = np.array([[0.5, 0.35], [0.65, 0.5]])            # two arms: the mean is over the K - 1 = 1 other arm
+    got = student.borda_winner(two)
+    assert _is_int(got) and got == 1, f"with two arms, got {_shown(got)}: the arm that beats the other with P > 1/2 wins"
