@@ -63,6 +63,9 @@ def test_plays_through_the_environment(student, rng):
     n = env.n_duels
     assert n == 300, f"rucb should duel exactly once per step through env.duel (300 steps), it dueled {n} times"
     pairs = _run(student, P, 300, 0)
+    again = _run(student, P, 300, 0)
+    assert np.array_equal(pairs, again), ("two runs with the same rng seed (and the same bandit) dueled differently: draw "
+                                          "every random choice from the rng argument")
     unseen = sorted(set(range(len(P))) - set(pairs.ravel().tolist()))
     assert not unseen, (f"arms {unseen} were never played in 300 duels: with no duels yet every U is 1, so every "
                         "arm is a candidate and RUCB explores them all")
