@@ -13,6 +13,7 @@ worker start).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import socket
@@ -23,7 +24,6 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
-os.environ["RLCOURSE_REPO"] = str(REPO / "tests" / "fixtures" / "course")  # the course tools grade the fixture's fx
 
 GRADE_ONE = """
 import json, resource, sys, time
@@ -43,13 +43,26 @@ MEMORY_RATIO = 2.0
 """The grader's peak memory on any submission, as a multiple of the untouched notebook's."""
 
 
+@contextlib.contextmanager
+def fixture_course():
+    """The course tools pointed at the fixture course (they may be imported already, under pytest say)."""
+    from autograder import course
+    from conftest import FIXTURE_COURSE
+
+    repo, course.REPO = course.REPO, FIXTURE_COURSE
+    try:
+        yield course
+    finally:
+        course.REPO = repo
+
+
 def wall_bound() -> float:
     """Seconds a submission of ``fx`` may take in all: its sandbox time, the reader's budget, worker starts."""
-    from autograder import course
     from autograder.intake import PARSE_WALL_SECONDS
     from autograder.session import START_SECONDS
 
-    return course.limits("fx").submission_seconds + PARSE_WALL_SECONDS + START_SECONDS
+    with fixture_course() as course:
+        return course.limits("fx").submission_seconds + PARSE_WALL_SECONDS + START_SECONDS
 
 
 def grade_alone(notebook: Path, timeout: float) -> dict:
@@ -70,7 +83,6 @@ def grade_alone(notebook: Path, timeout: float) -> dict:
 def write_corpus(folder: Path) -> tuple[Path, dict[str, Path | None]]:
     """Every corpus submission in ``folder``/submissions, and the notebook batch grading would open for
     each (None where it opens nothing: a link, a pipe), found as ``batch`` finds them."""
-    from autograder import course
     from autograder.batch import discover
     from conftest import FIXTURE_COURSE, with_cells
     from test_adversarial import CASES, _case_source, _hostile_files
@@ -85,11 +97,8 @@ def write_corpus(folder: Path) -> tuple[Path, dict[str, Path | None]]:
     _hostile_files(submissions, folder)
     port.close()
     untouched = with_cells(FIXTURE_COURSE / "assignments/fx/fx.ipynb", folder / "untouched.ipynb", {})
-    repo, course.REPO = course.REPO, FIXTURE_COURSE  # already imported (under pytest, say): point it at fx
-    try:
+    with fixture_course() as course:
         entries = discover(submissions, "fx", course.stub_names("fx"))
-    finally:
-        course.REPO = repo
     return untouched, {e.name: e.notebook for e in entries}
 
 
