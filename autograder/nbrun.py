@@ -31,13 +31,17 @@ class RunReport:
     seconds: float
     cells_run: int
     failed_cell: int | None = None
+    """The failing cell's number among the notebook's own code cells (the injected parameters not counted)."""
     failed_source_line: str = ""
     error: str = ""
+    failed_label: str = ""
+    """The failing cell's nbgrader ``grade_id`` (or its tag), when it has one."""
 
     def describe(self, path: str | Path) -> str:
         if self.ok:
             return f"{path}: ran {self.cells_run} code cells in {self.seconds:.1f} s"
         where = f"code cell {self.failed_cell}" if self.failed_cell is not None else "the notebook"
+        where += f" (`{self.failed_label}`)" if self.failed_label else ""
         line = f"\n    at: {self.failed_source_line}" if self.failed_source_line else ""
         return f"{path}: FAILED in {where} after {self.seconds:.1f} s{line}\n    {self.error}"
 
@@ -94,7 +98,8 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
         for index, cell in enumerate(nb.cells):
             if cell.cell_type != "code":
                 continue
-            count += 1
+            injected = "injected-parameters" in cell.metadata.get("tags", [])
+            count += not injected
             client.timeout = max(1, math.ceil(timeout - (time.monotonic() - start)))
             try:
                 client.execute_cell(cell, index)
@@ -109,6 +114,9 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
                 report = RunReport(False, time.monotonic() - start, count, count,
                                    _failing_line(cell.source, error_output.get("traceback", [])), message[:2000])
             if report is not None:
+                tags = [t for t in cell.metadata.get("tags", []) if t not in ("setup", "check", "experiment")]
+                report.failed_label = cell.metadata.get("nbgrader", {}).get("grade_id") or (tags[0] if tags else "")
+                report.failed_cell = max(count, 1)
                 break
     if output is not None:
         nbformat.write(nb, str(output))

@@ -39,6 +39,17 @@ def test_a_failure_names_the_cell_the_line_and_the_error(tmp_path):
     assert "code cell 2" in report.describe(path)
 
 
+def test_the_failing_cell_is_counted_as_the_student_counts_and_named(tmp_path):
+    """The injected parameters cell is not counted; a graded cell is named by its grade_id."""
+    path = notebook(tmp_path, "FAST = False", "x = 1", "raise ValueError('boom')")
+    nb = nbformat.read(str(path), as_version=4)
+    nb.cells[3].metadata["nbgrader"] = {"grade_id": "my_stub", "solution": True}
+    nbformat.write(nb, str(path))
+    report = run_notebook(path, {"FAST": True}, timeout=120)
+    assert report.failed_cell == 3 and report.failed_label == "my_stub"
+    assert "code cell 3 (`my_stub`)" in report.describe(path)
+
+
 def test_the_time_budget_covers_the_whole_notebook(tmp_path):
     path = notebook(tmp_path, "import time\ntime.sleep(2)", "time.sleep(2)", "time.sleep(2)")
     report = run_notebook(path, timeout=5)
