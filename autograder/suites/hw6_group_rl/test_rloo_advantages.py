@@ -45,6 +45,10 @@ def test_unbiased_by_enumeration(student, rng):
     all_groups = np.array(np.meshgrid(*[np.arange(k)] * g, indexing="ij")).reshape(g, -1).T     # (K^G, G)
     adv = as_array(student.rloo_advantages(torch.as_tensor(r[all_groups])), "the advantages")
     assert adv.shape == all_groups.shape, f"the advantages have shape {adv.shape}, expected {all_groups.shape}"
+    # Unbiasedness alone passes no baseline at all (plain REINFORCE is unbiased too): leave-one-out advantages
+    # also sum to zero over each group.
+    assert np.allclose(adv.sum(axis=1), 0, atol=1e-9), \
+        "a group's leave-one-out advantages should sum to zero; these do not: is a baseline subtracted at all?"
     weight = p[all_groups].prod(axis=1)
     score = np.eye(k)[all_groups] - p                                                         # grad log pi, (K^G, G, K)
     expected = (weight[:, None] * (adv[..., None] * score).mean(axis=1)).sum(axis=0)
