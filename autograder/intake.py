@@ -199,10 +199,12 @@ def _in_child(path: str | Path, cap: int, mode: str, memory: int) -> dict[str, A
         raise NotebookError(f"reading the notebook took over {PARSE_WALL_SECONDS:.0f} s; it was not graded") from None
     finally:
         os.close(fd)
-    if done.returncode != 0:
+    if done.returncode < 0:  # killed by a signal: its CPU limit, or a parser that overflowed the stack
         raise NotebookError("reading the notebook exceeded the grader's budget for it "
                             f"({_size(memory)} of memory, {PARSE_CPU_SECONDS} s of CPU): "
                             "it is not a notebook Jupyter saves")
+    if done.returncode != 0:  # the reader itself could not run (it answers every submission's fault in JSON)
+        raise GraderError("the notebook reader could not run: " + done.stderr.decode(errors="replace")[-500:])
     try:
         data = json.loads(done.stdout.decode("utf-8", "surrogatepass"))
     except ValueError:
@@ -332,24 +334,26 @@ def _analyse(raw: bytes, mode: str) -> dict[str, Any]:
 
 
 def _child_main(mode: str, cap: int, memory: int) -> None:
-    """[child] Read the notebook on standard input within the budget; write the analysis as JSON."""
+    """[child] Read the notebook on standard input within the budget; write the analysis as JSON.
+
+    Whatever the notebook does to this process (memory, recursion) is answered in JSON as the
+    submission's problem; only a fault of this reader's own code is reported as one (``fault``).
+    """
     _limit_self(memory)
     try:
         raw = sys.stdin.buffer.read(cap + 1)
-        if len(raw) > cap:
-            out = {"error": f"the notebook is over the {_size(cap)} limit"}
-        else:
-            out = _analyse(raw, mode)
+        out = {"error": f"the notebook is over the {_size(cap)} limit"} if len(raw) > cap else _analyse(raw, mode)
+        del raw
+        encoded = json.dumps(out, ensure_ascii=False).encode("utf-8", "surrogatepass")
+        if len(encoded) > 2 * cap + MAX_CELL_BYTES:  # sources of control characters, each escaped in six bytes
+            encoded = json.dumps({"error": "the notebook's code is too large to grade"}).encode()
     except MemoryError:
-        out = {"error": f"reading the notebook needs more than the grader's {_size(memory)} for it; "
-                        "it is not a notebook Jupyter saves"}
+        encoded = json.dumps({"error": f"reading the notebook needs more than the grader's {_size(memory)} for "
+                                       "it; it is not a notebook Jupyter saves"}).encode()
     except RecursionError:
-        out = {"error": "the notebook's code is nested too deeply to analyse"}
+        encoded = json.dumps({"error": "the notebook's code is nested too deeply to analyse"}).encode()
     except Exception as err:  # noqa: BLE001 - a bug of this reader: the grader's fault, reported as such
-        out = {"fault": f"{type(err).__name__}: {str(err)[:300]}"}
-    encoded = json.dumps(out, ensure_ascii=False).encode("utf-8", "surrogatepass")
-    if len(encoded) > 2 * cap + MAX_CELL_BYTES:  # sources of control characters, each escaped in six bytes
-        encoded = json.dumps({"error": "the notebook's code is too large to grade"}).encode()
+        encoded = json.dumps({"fault": f"{type(err).__name__}: {str(err)[:300]}"}).encode()
     sys.stdout.buffer.write(encoded)
 
 

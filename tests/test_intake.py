@@ -145,3 +145,12 @@ def test_format_3_notebooks_are_converted(tmp_path):
     found, match_notes = find_stubs(nb, STUBS)
     assert found["scaled_sum"].source == "def scaled_sum(x):\n    return x\n" and found["scaled_sum"].how == "name"
     assert any("format 3" in n for n in notes)
+
+
+def test_a_reader_that_cannot_run_is_the_graders_fault_not_the_submissions(monkeypatch):
+    from autograder import intake
+    from autograder.results import GraderError
+
+    monkeypatch.setattr(intake.sys, "executable", "/bin/false")  # exits 1 before reading anything
+    with pytest.raises(GraderError, match="could not run"):
+        read_code_cells(RELEASE)
