@@ -20,32 +20,8 @@ from scipy.special import expit, log_expit, logsumexp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import lecture_math as lm  # noqa: E402
+from lecture_checks import central_difference, enumerate_trajectories as trajectories, random_policy  # noqa: E402
 from lecture_links import checks  # noqa: E402
-
-
-def random_policy(rng, *shape):
-    return rng.dirichlet(np.ones(shape[-1]), size=shape[:-1])
-
-
-def trajectories(P, p0, pi):
-    """All ((s_0, a_0), ..., (s_{T-1}, a_{T-1})) with their probabilities, multiplied out term by term."""
-    horizon, n_states, n_actions = pi.shape
-    steps = list(itertools.product(range(n_states), range(n_actions)))
-    for traj in itertools.product(steps, repeat=horizon):
-        prob = p0[traj[0][0]]
-        for t, (s, a) in enumerate(traj):
-            prob *= pi[t, s, a] * (P[s, a, traj[t + 1][0]] if t + 1 < horizon else 1.0)
-        if prob > 0:
-            yield traj, prob
-
-
-def central_difference(fun, x, h=1e-5):
-    grad = np.zeros_like(x)
-    for idx in np.ndindex(x.shape):
-        step = np.zeros_like(x)
-        step[idx] = h
-        grad[idx] = (fun(x + step) - fun(x - step)) / (2 * h)
-    return grad
 
 
 # ---------------------------------------------------------------------------
