@@ -5,6 +5,7 @@
   export [--out CSV] [--long]             the course's final grades, one CSV (student x assignment)
   regrade ID FOLDER --out DIR [--only N]  regrade after a suite fix; earlier results kept in DIR/_previous/
   results-diff OLD NEW                    per submission, what changed between two result folders
+  class-report ID [FOLDER] --results DIR  item analysis (and, given FOLDER, similar stub code) of a batch
 
 Each takes ``--course ROOT``, the nbgrader course (its ``nbgrader_config.py``, gradebook and
 ``autograded/`` folder); the default is this repository.
@@ -70,6 +71,20 @@ def _cmd_diff(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_class_report(args: argparse.Namespace) -> int:
+    from autograder import course
+    from autograder.outputs.class_report import REPORT_DIR, write_class_report
+
+    course.check_assignment(args.assignment)
+    out = args.out or args.results / REPORT_DIR
+    report = write_class_report(args.assignment, args.results, out, args.folder, args.threshold, args.jobs)
+    print(f"wrote {out / 'report.html'} and {out / 'report.md'}: {len(report.table.names)} submission(s) with a score")
+    if report.similarity is not None:
+        print(f"similar stub code: {len(report.similarity.pairs)} pair(s) flagged among "
+              f"{report.similarity.compared} compared (grades unchanged)")
+    return 0
+
+
 def add_commands(sub: argparse._SubParsersAction) -> None:
     """Register this room's commands on ``python -m autograder``'s sub-parsers."""
     p = sub.add_parser("nbgrader-sync", help="record a batch in the nbgrader gradebook for formgrader")
@@ -101,3 +116,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("old", type=Path)
     p.add_argument("new", type=Path)
     p.set_defaults(fn=_cmd_diff)
+    p = sub.add_parser("class-report", help="item analysis and similar stub code of a graded batch")
+    p.add_argument("assignment")
+    p.add_argument("folder", type=Path, nargs="?", default=None,
+                   help="the submissions folder the batch graded: also list pairs with similar stub code")
+    p.add_argument("--results", type=Path, required=True, help="the batch's --out folder")
+    p.add_argument("--out", type=Path, default=None, help="report folder (default DIR/_class_report)")
+    p.add_argument("--threshold", type=float, default=None,
+                   help="flag a pair when each shares at least this fraction of its stub code (default 0.6)")
+    p.add_argument("--jobs", type=int, default=2, help="notebooks read at once (each in its own process)")
+    p.set_defaults(fn=_cmd_class_report)
