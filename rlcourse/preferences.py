@@ -28,7 +28,7 @@ stubs are run against.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 import torch
@@ -40,7 +40,10 @@ from rlcourse.nets import mlp
 
 ITEMS_FILE = "items/comparisons.npz"
 ITEMS_UTILITIES_FILE = "items/true_utilities.npz"
-HOPPER_PREFS_FILE = "hopper_prefs/hopper_prefs.npz"
+HOPPER_PREFS_UPRIGHT_FILE = "hopper_prefs/hopper_prefs.npz"
+"""the first Hopper set: every segment shows a robot still upright (kept: earlier results were measured on it)"""
+HOPPER_PREFS_FILE = "hopper_prefs/hopper_prefs_falls.npz"
+"""the course's Hopper set: the upright set plus segments that end in a fall and pairs that contain them"""
 
 
 # --------------------------------------------------------------------------- tie model and annotator
@@ -141,6 +144,9 @@ class HopperPreferences:
     ``source`` ``(N,)`` index into ``source_names`` (the policy that produced the segment),
     ``test_segment`` ``(N,)`` bool (segments of held-out episodes); ``train_pairs`` ``(M, 2)`` and
     ``test_pairs`` ``(M_test, 2)`` index segments, ``train_mu`` and ``test_mu`` are their labels.
+    ``terminated`` ``(N,)`` bool marks segments that contain a fall: their first ``length`` steps are
+    real and the rest are the absorbing state after the fall (reward 0, action 0, the last real
+    observation repeated as a placeholder); ``absorbing`` is that ``(N, L)`` mask.
     """
 
     obs: np.ndarray
@@ -158,6 +164,20 @@ class HopperPreferences:
     rollout_length: np.ndarray
     source_names: list[str]
     info: dict[str, Any] = field(default_factory=dict)
+    terminated: Optional[np.ndarray] = None
+    length: Optional[np.ndarray] = None
+
+    def __post_init__(self) -> None:
+        n, seg_len = self.obs.shape[:2]
+        if self.terminated is None:  # the upright set: no falls
+            self.terminated = np.zeros(n, dtype=bool)
+        if self.length is None:
+            self.length = np.full(n, seg_len, dtype=np.int64)
+
+    @property
+    def absorbing(self) -> np.ndarray:
+        """``(N, L)`` bool: True on the steps after a segment's fall (the absorbing state)."""
+        return np.arange(self.obs.shape[1]) >= self.length[:, None]
 
     @property
     def returns(self) -> np.ndarray:
@@ -171,16 +191,17 @@ class HopperPreferences:
                                   self.info["flip_rate"], self.info["log_theta"], rng)
 
 
-def load_hopper_preferences() -> HopperPreferences:
-    """The shipped Hopper preference data set, verified against the MANIFEST."""
-    d = _data.load_npz(HOPPER_PREFS_FILE)
+def load_hopper_preferences(name: str = HOPPER_PREFS_FILE) -> HopperPreferences:
+    """A shipped Hopper preference data set (by default the one with falls), verified against the MANIFEST."""
+    d = _data.load_npz(name)
+    falls = {"terminated": d["terminated"], "length": d["length"].astype(np.int64)} if "terminated" in d else {}
     return HopperPreferences(
         obs=d["obs"].astype(np.float32), act=d["act"].astype(np.float32), rewards=d["rewards"].astype(np.float32),
         source=d["source"], test_segment=d["test_segment"], train_pairs=d["train_pairs"].astype(np.int64),
         train_mu=d["train_mu"], test_pairs=d["test_pairs"].astype(np.int64), test_mu=d["test_mu"],
         rollout_obs=d["rollout_obs"].astype(np.float32), rollout_act=d["rollout_act"].astype(np.float32),
         rollout_rewards=d["rollout_rewards"].astype(np.float32), rollout_length=d["rollout_length"].astype(np.int64),
-        source_names=[str(s) for s in d["source_names"]], info=_data.info(HOPPER_PREFS_FILE)["info"])
+        source_names=[str(s) for s in d["source_names"]], info=_data.info(name)["info"], **falls)
 
 
 # --------------------------------------------------------------------------- dueling bandits
@@ -236,13 +257,23 @@ class _Member(nn.Module):
         self.net = ensemble.members[k]
         self._ensemble, self.k = [ensemble], k  # a list hides the parent from nn.Module's registry
 
-    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
+    def forward(self, obs: torch.Tensor, act: torch.Tensor, absorbing: Optional[torch.Tensor] = None) -> torch.Tensor:
         ens = self._ensemble[0]
-        return (self.net(ens.scale_inputs(obs, act)).squeeze(-1) - ens.out_mean[self.k]) / ens.out_std[self.k]
+        raw = self.net(ens.scale_inputs(obs, act)).squeeze(-1)
+        if absorbing is not None:
+            raw = torch.where(torch.as_tensor(absorbing, dtype=torch.bool), ens.absorbing_reward[self.k], raw)
+        return (raw - ens.out_mean[self.k]) / ens.out_std[self.k]
 
 
 class RewardEnsemble(nn.Module):
     """``n_members`` small MLPs, each mapping one step's ``(obs, act)`` to a scalar reward.
+
+    With ``absorbing=True`` each member also holds one learned number, ``absorbing_reward[k]`` (a
+    parameter, in the member's raw output units): the reward of the absorbing state after a fall.
+    Passing an ``absorbing`` mask (the shape of the steps) to ``forward``, ``member(k)`` or
+    ``predict`` puts that number on the masked steps instead of the network's output, so segments
+    that end in a fall are scored as the data describes them, and comparisons against them identify
+    the per-step constant that equal-length upright segments cannot.
 
     Calling the ensemble on ``obs`` ``(..., obs_dim)`` and ``act`` ``(..., act_dim)`` (tensors or
     arrays) gives ``(n_members, ...)`` per-step rewards. Inputs are standardised with statistics
@@ -254,7 +285,7 @@ class RewardEnsemble(nn.Module):
     """
 
     def __init__(self, obs_dim: int, act_dim: int, n_members: int = 3, hidden: Sequence[int] = (64, 64),
-                 seed: int = 0) -> None:
+                 seed: int = 0, absorbing: bool = False) -> None:
         super().__init__()
         with torch.random.fork_rng():
             torch.manual_seed(seed)
@@ -264,6 +295,9 @@ class RewardEnsemble(nn.Module):
         self.register_buffer("in_std", torch.ones(obs_dim + act_dim))
         self.register_buffer("out_mean", torch.zeros(n_members))
         self.register_buffer("out_std", torch.ones(n_members))
+        self.has_absorbing = absorbing
+        if absorbing:
+            self.absorbing_reward = nn.Parameter(torch.zeros(n_members))
 
     def scale_inputs(self, obs, act) -> torch.Tensor:
         x = torch.cat([torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(act, dtype=torch.float32)], -1)
@@ -280,11 +314,23 @@ class RewardEnsemble(nn.Module):
     def member(self, k: int) -> nn.Module:
         return _Member(self, k)
 
-    def forward(self, obs, act) -> torch.Tensor:
+    def forward(self, obs, act, absorbing=None) -> torch.Tensor:
         x = self.scale_inputs(obs, act)
         raw = torch.stack([net(x).squeeze(-1) for net in self.members])  # (n_members, ...)
         shape = (-1,) + (1,) * (raw.dim() - 1)
+        if absorbing is not None:
+            if not self.has_absorbing:
+                raise ValueError("this ensemble has no absorbing-state reward (made with absorbing=False)")
+            raw = torch.where(torch.as_tensor(absorbing, dtype=torch.bool), self.absorbing_reward.view(shape), raw)
         return (raw - self.out_mean.view(shape)) / self.out_std.view(shape)
+
+    @torch.no_grad()
+    def absorbing_value(self) -> np.ndarray:
+        """Each member's normalised reward of the absorbing state, ``(n_members,)``: what ``forward`` puts on
+        masked steps."""
+        if not self.has_absorbing:
+            raise ValueError("this ensemble has no absorbing-state reward (made with absorbing=False)")
+        return ((self.absorbing_reward - self.out_mean) / self.out_std).numpy()
 
     @torch.no_grad()
     def normalise_(self, obs, act) -> "RewardEnsemble":
@@ -297,9 +343,9 @@ class RewardEnsemble(nn.Module):
         return self
 
     @torch.no_grad()
-    def predict(self, obs, act) -> np.ndarray:
-        """Per-step rewards as a numpy array ``(n_members, ...)`` (no gradient)."""
-        return self(obs, act).numpy()
+    def predict(self, obs, act, absorbing=None) -> np.ndarray:
+        """Per-step rewards as a numpy array ``(n_members, ...)`` (no gradient); ``absorbing`` as in ``forward``."""
+        return self(obs, act, absorbing).numpy()
 
 
 # --------------------------------------------------------------------------- rendering

@@ -44,14 +44,16 @@ def load_reference() -> GaussianPolicy:
 def save_reward_model(ensemble: RewardEnsemble, path: str | Path, **metadata: float | int | str) -> None:
     """Save a reward ensemble as a checkpoint (config, ``state_dict``, metadata), atomically."""
     config = {"obs_dim": ensemble.obs_dim, "act_dim": ensemble.act_dim, "n_members": ensemble.n_members,
-              "hidden": ensemble.hidden}
+              "hidden": ensemble.hidden, **({"absorbing": True} if ensemble.has_absorbing else {})}
     save_model(ensemble, path, config, **metadata)
 
 
 def load_reward_model(name: str = REWARD_MODEL_FILE) -> RewardEnsemble:
     """The shipped reward ensemble (made by ``datasets/scripts/make_hw4_reward_model.py`` from hw3's pairs),
     in eval mode; ``.metadata`` holds its held-out accuracy, the mean and standard deviation of its
-    per-step reward on the preference data (``step_mean``, ``step_std``) and its fit time."""
+    per-step reward on the real steps of the preference data (``step_mean``, ``step_std``), its fit time,
+    and, for a model with an absorbing-state reward, that reward (``absorbing_reward``, in the units of
+    :func:`reward_function`) and the offset that puts it at zero once normalised (``data_offset``)."""
     return load_model(_data.verify(name), RewardEnsemble).requires_grad_(False)
 
 
@@ -162,3 +164,49 @@ def train_dpo(policy: GaussianPolicy, reference: GaussianPolicy, dpo_loss: Calla
         if due(step, eval_every, n_steps):
             run_evaluation(actor, step)
     return actor.eval(), log
+
+
+# --------------------------------------------------------------------------- choosing settings without the true reward
+def reward_disagreement(ensemble: RewardEnsemble, obs: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """Per-step standard deviation over the ensemble's members of the normalised reward, ``obs.shape[:-1]``:
+    large where the members were not pinned down by comparisons (away from the preference data)."""
+    return ensemble.predict(np.asarray(obs, np.float32), np.asarray(act, np.float32)).std(0)
+
+
+def disagreement_threshold(ensemble: RewardEnsemble, obs: np.ndarray, act: np.ndarray, real: np.ndarray,
+                           quantile: float = 0.9) -> float:
+    """The ``quantile`` of the per-segment mean disagreement over the given segments ``(N, L, .)``, real steps
+    only (``real`` ``(N, L)`` bool): how much the members disagree on states that comparisons covered."""
+    d = reward_disagreement(ensemble, obs, act)
+    return float(np.quantile((d * real).sum(1) / real.sum(1), quantile))
+
+
+def preference_only_check(policy: GaussianPolicy, reference: GaussianPolicy, ensemble: RewardEnsemble, offset: float,
+                          n_episodes: int = 10, seed: int = EVAL_SEED, max_steps: Optional[int] = None
+                          ) -> dict[str, float]:
+    """What may be known about a trained policy without the true reward: over deterministic episodes, its
+    ``learned_return`` (the normalised learned reward plus ``offset`` per step, as RLHF optimised it),
+    ``disagreement`` (mean per-step ensemble disagreement on the states it visits), ``kl`` to the
+    reference and episode ``length``. The true return is deliberately not returned."""
+    eps = rollout(policy.act, ENV_ID, n_episodes, seed=seed, max_steps=max_steps, progress=False)
+    obs, act = eps.flat()
+    meta = ensemble.metadata
+    r = (reward_function(ensemble)(obs, act) - meta["step_mean"]) / meta["step_std"] + offset
+    return {"learned_return": float(r.sum() / n_episodes), "disagreement": float(reward_disagreement(ensemble, obs, act).mean()),
+            "kl": mean_kl(policy, reference, obs), "length": float(eps.lengths.mean())}
+
+
+def choose_kl_coef(checks: dict[float, dict[str, float]], threshold: float) -> float:
+    """The KL coefficient whose policy has the highest learned return among those whose states the reward
+    model still covers (mean disagreement at most ``threshold``); the largest coefficient if none does."""
+    covered = {c: ch for c, ch in checks.items() if ch["disagreement"] <= threshold}
+    if not covered:
+        return max(checks)
+    return max(covered, key=lambda c: covered[c]["learned_return"])
+
+
+def choose_beta(val_accuracy: dict[float, float], tolerance: float = 0.005) -> float:
+    """The DPO beta whose implicit reward ranks the held-out pairs best; within ``tolerance`` of the best,
+    the largest beta (the policy closest to the reference)."""
+    best = max(val_accuracy.values())
+    return max(b for b, acc in val_accuracy.items() if acc >= best - tolerance)
