@@ -9,7 +9,8 @@ Items are the stubs and each stub's hidden tests. Over the N submissions with a 
 ungradable, the latter at zero everywhere, as in ``gradebook.csv``; grader errors have no score and
 are left out), each item gets:
 
-- attempted: submissions whose stub was there and no longer raised ``NotImplementedError``;
+- attempted: graded submissions whose stub was there and no longer raised ``NotImplementedError`` (an
+  ungradable one attempted nothing the grader could see);
 - mean score and the fraction with full marks, over all N;
 - discrimination: the Pearson correlation of the item's score with the rest of the score (the
   total minus the item), so an item is not correlated with itself. When the item or the rest takes
@@ -31,7 +32,7 @@ from autograder.outputs.batch_output import read_results
 from autograder.outputs.similarity import (NEVER_A_GRADE, Pair, StubCode, pair_page, read_stub_code, release_code,
                                            similar_pairs, THRESHOLD)
 from autograder.report import atomic_write, cap, markdown_text, plain
-from autograder.results import GRADER_ERROR, GradeResult
+from autograder.results import GRADED, GRADER_ERROR, GradeResult
 
 REPORT_DIR = "_class_report"
 """The report's folder inside the batch folder (a name no submission's safe name takes; see batch_output)."""
@@ -103,7 +104,7 @@ def class_table(results: dict[str, GradeResult]) -> ClassTable:
     for i, r in enumerate(scored.values()):
         for s in r.stubs:
             stub_scores[i, stub_col[s.name]] = s.score
-            attempted[i, stub_col[s.name]] = _attempted(s.tests)
+            attempted[i, stub_col[s.name]] = r.status == GRADED and _attempted(s.tests)
             for t in s.tests:
                 test_scores[i, test_col[(t.stub, t.name)]] = t.points if t.passed else 0.0
     test_max_arr = np.array([test_max[k] for k in tests])
@@ -116,7 +117,7 @@ def class_table(results: dict[str, GradeResult]) -> ClassTable:
 def item_rest_correlation(scores: np.ndarray, totals: np.ndarray) -> np.ndarray:
     """Per column of ``scores`` (N, M), Pearson's r between the item and ``totals`` minus it; NaN where the item
     or the rest is constant over the class (no spread, no correlation), or fewer than two submissions."""
-    scores = np.asarray(scores, dtype=float).reshape(len(totals), -1)
+    scores = np.asarray(scores, dtype=float)
     if len(totals) < 2:
         return np.full(scores.shape[1], np.nan)
     rest = np.asarray(totals, dtype=float)[:, None] - scores
@@ -152,7 +153,7 @@ def failures(results: dict[str, GradeResult]) -> tuple[list[Failure], list[tuple
     hints: dict[tuple[str, str], str] = {}
     messages: Counter = Counter()
     for r in results.values():
-        if not r.has_score:
+        if r.status != GRADED:  # an ungradable one failed every test for one reason, listed in its feedback
             continue
         for s in r.stubs:
             if not _attempted(s.tests):
