@@ -403,7 +403,12 @@ def find_similar(assignment: str, folder: Path, out_dir: Path, threshold: float 
                  jobs: int = 2) -> Similarity:
     """Compare the stub code of every submission in ``folder``; write a side-by-side page per flagged pair
     into ``out_dir/similarity/`` (earlier pages removed) and return what to list."""
-    codes = read_stub_code(assignment, folder, jobs=jobs)
+    return compare_and_write(assignment, read_stub_code(assignment, folder, jobs=jobs), out_dir, threshold)
+
+
+def compare_and_write(assignment: str, codes: list[StubCode], out_dir: Path, threshold: float = THRESHOLD
+                      ) -> Similarity:
+    """The second half of :func:`find_similar`, once the stub code is read."""
     flagged, scores = similar_pairs(codes, release_code(assignment), threshold=threshold)
     pages_dir = out_dir / "similarity"
     if pages_dir.is_dir():
