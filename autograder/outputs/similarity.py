@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import html
+import re
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,8 @@ from pathlib import Path
 import numpy as np
 from copydetect import compare_files
 from copydetect.utils import filter_code, get_token_coverage, highlight_overlap, winnow
+from pygments.lexers import PythonLexer
+from pygments.token import String
 
 from autograder import course
 from autograder.batch import discover
@@ -62,16 +65,24 @@ class Pair:
     slices_b: np.ndarray
 
 
+def without_docstrings(source: str) -> str:
+    """``source`` without its docstrings (a triple-quoted string opening a line, Pygments' ``String.Doc``) and
+    the indented lines they leave blank. The release's docstrings are boilerplate, but a match that starts
+    or ends beside one would mark the whole docstring on the side-by-side page (a string is one token)."""
+    kept = "".join(text for kind, text in PythonLexer().get_tokens(source) if kind not in String.Doc)
+    return re.sub(r"(?m)^[ \t]+\n", "", kept)
+
+
 def joined_stubs(sources: dict[str, str], stubs: list[str]) -> str:
-    """The stub sources in the assignment's order, each under a comment naming it (comments are not compared);
-    a cell matched for several stubs (one cell defining them all) is shown once."""
+    """The stub sources in the assignment's order, docstrings left out, each under a comment naming it
+    (comments are not compared); a cell matched for several stubs (one cell defining them all) is shown once."""
     seen: set[str] = set()
     parts = []
     for stub in stubs:
         source = sources.get(stub)
         if source is not None and source not in seen:
             seen.add(source)
-            parts.append(f"# ---- {stub}\n{source.rstrip()}\n")
+            parts.append(f"# ---- {stub}\n{without_docstrings(source).rstrip()}\n")
     return "\n".join(parts)
 
 
@@ -101,7 +112,8 @@ def release_code(assignment: str) -> str:
     stubs = course.stub_names(assignment)
     skeletons = {c.metadata["nbgrader"]["grade_id"]: c.source for c in nb.cells
                  if c.cell_type == "code" and c.metadata.get("nbgrader", {}).get("grade_id") in stubs}
-    return "\n".join([*(c.source for c in nb.cells if c.cell_type == "code"), joined_stubs(skeletons, stubs)])
+    return "\n".join([*(without_docstrings(c.source) for c in nb.cells if c.cell_type == "code"),
+                      joined_stubs(skeletons, stubs)])
 
 
 @dataclass
