@@ -645,3 +645,59 @@ def test_segment_comparisons_ignore_a_per_step_constant_that_early_termination_d
         return (q_lunge > q_walk).astype(int)
 
     assert (first_action(+1.0) == 0).all() and (first_action(-1.0) == 1).all()
+
+
+def _fit_segment_bt(features: np.ndarray, first_wins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Maximum-likelihood weights of sigma(features @ w) for Bernoulli outcomes (scipy's BFGS), and the
+    Fisher information at the optimum."""
+    nll = lambda w: -(first_wins * log_expit(features @ w) + (1 - first_wins) * log_expit(-features @ w)).sum()
+    grad = lambda w: -features.T @ (first_wins - expit(features @ w))
+    w = minimize(nll, np.zeros(features.shape[1]), jac=grad, method="BFGS", options={"gtol": 1e-8}).x
+    p = expit(features @ w)
+    return w, (features * (p * (1 - p))[:, None]).T @ features
+
+
+@checks("eq-absorbing-return", "79b8b059")
+def test_pairs_with_a_fall_identify_the_upright_constant_that_upright_pairs_cannot():
+    """Upright reward x . w + c per step, absorbing state 0, segments of L = 10 steps. Pairs labelled by
+    Bradley-Terry on the returns of eq-absorbing-return. Fitting (w, c - r_abs) by maximum likelihood: with
+    falls in the data the constant is recovered; with upright segments only, the Fisher information is
+    singular along it (the likelihood is flat in c). And the invariance the lecture states: adding a
+    constant to the upright steps and to the absorbing state alike changes no probability."""
+    rng = np.random.default_rng(7)
+    L, n_pairs, dim = 10, 20_000, 3
+    w_true, c_true, r_abs = np.array([0.4, -0.3, 0.2]), 1.0, 0.0
+
+    def segments(n: int, fall_rate: float) -> tuple[np.ndarray, np.ndarray]:
+        x = rng.normal(size=(n, L, dim))
+        k = np.where(rng.random(n) < fall_rate, rng.integers(1, L, size=n), L)  # real steps
+        return x, k
+
+    def returns(x, k, w, c, absorbing):
+        real = np.arange(L) < k[:, None]
+        return ((x @ w + c) * real).sum(1) + (L - k) * absorbing
+
+    for fall_rate in (0.3, 0.0):
+        (xa, ka), (xb, kb) = segments(n_pairs, fall_rate), segments(n_pairs, fall_rate)
+        first_wins = (rng.random(n_pairs) < expit(returns(xa, ka, w_true, c_true, r_abs)
+                                                  - returns(xb, kb, w_true, c_true, r_abs))).astype(float)
+        # R_a - R_b is linear in (w, d = c - r_abs): features are the summed real-step x and k_a - k_b
+        real_sum = lambda x, k: (x * (np.arange(L) < k[:, None])[..., None]).sum(1)
+        features = np.column_stack([real_sum(xa, ka) - real_sum(xb, kb), ka - kb])
+        w_fit, fisher = _fit_segment_bt(features, first_wins)
+        if fall_rate > 0:
+            assert abs(w_fit[-1] - (c_true - r_abs)) < 0.1, f"fitted constant {w_fit[-1]:.3f}, true {c_true - r_abs}"
+            assert np.allclose(w_fit[:dim], w_true, atol=0.05)
+            assert np.linalg.eigvalsh(fisher).min() > 100.0
+        else:
+            assert np.abs(fisher[-1]).max() == 0.0  # k_a - k_b = 0 on every pair: no information on c
+            assert abs(w_fit[-1]) < 1e-6  # the optimiser never moves it from where it started
+    # Shifting the upright reward and the absorbing reward by the same constant changes no probability;
+    # shifting only the upright reward changes those of pairs whose segments differ in length.
+    x1, k1 = segments(200, 0.5)
+    x2, k2 = segments(200, 0.5)
+    p = lambda c, a: lm.bradley_terry_prob(returns(x1, k1, w_true, c, a), returns(x2, k2, w_true, c, a))
+    assert np.allclose(p(3.0, 2.0), p(1.0, 0.0))
+    differ = k1 != k2
+    assert differ.any() and not np.allclose(p(2.0, 0.0)[differ], p(1.0, 0.0)[differ])
+    assert np.allclose(p(2.0, 0.0)[~differ], p(1.0, 0.0)[~differ])
