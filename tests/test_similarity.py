@@ -247,3 +247,16 @@ def test_the_report_lists_pairs_with_side_by_side_pages_and_changes_no_grade(cla
     side = pairs[0].read_text()
     assert NEVER_A_GRADE.split(".")[0] in side and side.count("<mark>") >= 2 and "<script" not in side
     assert "&gt;" in side  # the code is escaped (a `->` annotation), never pasted raw
+
+
+def test_a_padded_stub_cell_is_compared_up_to_the_cap(tmp_path):
+    from autograder.outputs.similarity import MAX_STUB_CHARS
+
+    folder = tmp_path / "submissions"
+    folder.mkdir()
+    padded = filled(solution_bodies())
+    padded["bc_loss"] += "\n" + "x = 1  # padding\n" * 50_000  # about 850 KB, under the grader's 1 MB cell cap
+    write(folder / "padded.ipynb", padded)
+    (code,) = read_stub_code(ASSIGNMENT, folder)
+    assert not code.problem and "def dagger(" in code.code
+    assert len(code.code) < len(course.stub_names(ASSIGNMENT)) * (MAX_STUB_CHARS + 100)

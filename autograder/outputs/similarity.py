@@ -38,6 +38,10 @@ THRESHOLD = 0.6
 """A pair is flagged when both submissions share at least this fraction of their own fingerprinted code."""
 MIN_SHARED = 60
 """...and the shared fragments cover at least this many filtered characters (a few short lines never flag)."""
+MAX_STUB_CHARS = 20_000
+"""A stub's code is compared up to this many characters (the longest solution stub cell has about 3,000): cells
+padded to the grader's 1 MB cap would otherwise cost seconds of tokenising and hashing, and every comparison
+with them more."""
 NEVER_A_GRADE = ("This list never changes a grade. Similar code is a reason to read two submissions side by side, "
                  "not evidence of copying: short stubs, the lecture's formulas and shared starter code make honest "
                  "solutions alike.")
@@ -94,7 +98,8 @@ def _read_one(name: str, notebook: Path | None, problem: str, stubs: list[str]) 
     except (NotebookError, GraderError) as err:
         return StubCode(name, "", f"could not read the notebook: {err}")
     found, _ = find_stubs(nb, stubs)
-    return StubCode(name, joined_stubs({s: m.source for s, m in found.items() if not m.problem}, stubs))
+    return StubCode(name, joined_stubs({s: m.source[:MAX_STUB_CHARS] for s, m in found.items() if not m.problem},
+                                       stubs))
 
 
 def read_stub_code(assignment: str, folder: Path, jobs: int = 2) -> list[StubCode]:
