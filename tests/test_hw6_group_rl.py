@@ -13,33 +13,75 @@ from rlcourse import group_rl as G
 from rlcourse.lm import LMConfig, TinyLM
 
 
-def test_completion_log_probs_is_the_masked_gather_of_log_softmax():
-    g = torch.Generator().manual_seed(0)
-    logits = torch.randn(3, 6, 5, generator=g, dtype=torch.float64)
-    tokens = torch.randint(0, 5, (3, 6), generator=g)
-    mask = torch.tensor([[1, 1, 1, 0, 0, 0], [0, 0, 1, 1, 1, 1], [0, 1, 0, 1, 0, 1]], dtype=torch.float64)
-    out = G.completion_log_probs(logits, tokens, mask)
-    logp = torch.log_softmax(logits, -1)
+def _tiny_lm(seed: int = 0) -> TinyLM:
+    torch.manual_seed(seed)
+    return TinyLM(LMConfig(vocab_size=11, context=8, n_layer=1, n_head=2, d_model=16))
+
+
+def test_completion_log_probs_runs_the_model_and_scores_only_completion_tokens():
+    model = _tiny_lm()
+    tokens = torch.tensor([[5, 6, 7, 3, 2, 0, 0, 0], [4, 4, 9, 8, 1, 6, 2, 0], [7, 3, 2, 0, 0, 0, 0, 0]])
+    out = G.completion_log_probs(model, tokens, prompt_len=2)
+    with torch.no_grad():
+        logp = torch.log_softmax(model(tokens), -1)
     for b in range(3):
-        for t in range(6):
-            want = float(logp[b, t - 1, tokens[b, t]]) if t > 0 and mask[b, t] else 0.0
-            assert math.isclose(float(out[b, t]), want, abs_tol=1e-12)
-    junk = logits.clone()
-    junk[0, 3:] = 1e6                         # logits that only score masked tokens
-    assert torch.allclose(G.completion_log_probs(junk, tokens, mask), out)
+        for t in range(8):
+            want = float(logp[b, t - 1, tokens[b, t]]) if t >= 2 and tokens[b, t] != 0 else 0.0
+            assert math.isclose(float(out[b, t]), want, rel_tol=1e-6, abs_tol=1e-7), (b, t)
+    assert torch.allclose(G.completion_log_prob_sums(model, tokens, 2), out.sum(1))
+    out.sum().backward()                                             # differentiable in the model's parameters
+    assert model.tok_emb.weight.grad is not None and float(model.tok_emb.weight.grad.abs().sum()) > 0
 
 
-def test_reward_model_is_standardised_on_its_pairs():
-    torch.manual_seed(0)
-    body = TinyLM(LMConfig(vocab_size=11, context=8, n_layer=1, n_head=2, d_model=16))
+def test_completion_log_probs_takes_a_model_not_logits():
+    """The helper's contract is not hw5's ``token_log_probs(logits, tokens, mask)``: it refuses logits."""
+    tokens = torch.tensor([[5, 6, 7, 2]])
+    with pytest.raises(TypeError, match="TinyLM"):
+        G.completion_log_probs(torch.zeros(1, 4, 11), tokens, 1)
+    with pytest.raises(TypeError, match="TinyLM"):
+        G.completion_log_probs(lambda x: torch.zeros(1, 4, 11), tokens, 1)
+    with pytest.raises(ValueError, match="prompt_len"):
+        G.completion_log_probs(_tiny_lm(), tokens, 0)
+
+
+def test_the_script_fits_a_reward_model_standardised_on_its_pairs():
+    import sys
+
+    sys.path.insert(0, str(REPO / "datasets" / "scripts"))
+    from make_hw6_models import fit_reward_model
+
+    body = _tiny_lm()
     chosen = torch.randint(1, 11, (40, 8))
     rejected = torch.randint(1, 11, (40, 8))
     before = [p.detach().clone() for p in body.parameters()]
-    rm = G.fit_reward_model(body, chosen, rejected, steps=3, seed=0, batch=8)
+    rm = fit_reward_model(body, chosen, rejected, steps=3, seed=0, batch=8)
     s = G.proxy_score(rm, torch.cat([chosen, rejected]))
     assert s.shape == (80,) and abs(float(s.mean())) < 1e-4 and abs(float(s.std()) - 1) < 1e-4
     assert all(torch.equal(a, b) for a, b in zip(before, body.parameters()))      # the SFT model itself is left alone
     assert not any(torch.equal(a, b) for a, b in zip(body.parameters(), rm.body.parameters()) if a.numel() > 16)
+
+
+def test_the_shipped_models_load_and_the_reward_model_beats_chance_on_held_out_pairs():
+    from rlcourse import reviews as R
+
+    rm, dpo = G.load_reward_model(), G.load_dpo_policy()
+    assert rm.metadata["test_accuracy"] > 0.6 and dpo.metadata["beta"] == 0.1 and dpo.metadata["steps"] == 90
+    prefs = R.load_preferences()
+    test = np.flatnonzero(prefs["test"])[:200]
+    c, r = torch.as_tensor(prefs["chosen"][test]), torch.as_tensor(prefs["rejected"][test])
+    accuracy = float((G.proxy_score(rm, c) > G.proxy_score(rm, r)).float().mean())
+    assert accuracy > 0.6, accuracy
+
+
+def test_hw6s_release_carries_no_bradley_terry_or_dpo_loss():
+    """hw5's ``reward_model_loss`` and ``dpo_loss`` are a log-sigmoid of a difference: no hw6 release file computes one."""
+    import nbformat
+
+    nb = nbformat.read(REPO / "assignments" / "hw6_group_rl" / "hw6_group_rl.ipynb", as_version=4)
+    texts = {"rlcourse/group_rl.py": (REPO / "rlcourse" / "group_rl.py").read_text()}
+    texts.update({f"cell {i}": c.source for i, c in enumerate(nb.cells) if c.cell_type == "code"})
+    for where, text in texts.items():
+        assert "logsigmoid" not in text and "log_sigmoid" not in text, where
 
 
 def test_best_of_n_from_pool_limits_and_errors():
