@@ -5,8 +5,8 @@
 The class is built from the student release: for each student and stub, the stub is left untouched
 (one time in five) or replaced by a mutant of the solution (``autograder.mutants.make_mutants``: the
 solution with one operator changed), drawn at random. Every submission thus derives from one
-solution, the worst case for this pass: most pairs are flagged and a side-by-side page is written
-for each. Times the two halves of ``class_report.find_similar`` (reading each notebook in its own
+solution, the worst case for this pass: most pairs are flagged, and side-by-side pages are written
+for the most similar (``class_report.MAX_PAGES``). Times the two halves of ``class_report.find_similar`` (reading each notebook in its own
 child process and matching its stubs; fingerprinting and comparing every pair and writing the
 pages) and prints a Markdown table with the load average and the CPU time (this process and its
 children).

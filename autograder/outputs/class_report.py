@@ -42,6 +42,9 @@ TOP_FAILURES = 10
 MESSAGE_SHOWN = 160
 """A failure message is counted and shown by its first line, cut here (it may quote a student's exception)."""
 CLOSEST_SHOWN = 5
+MAX_PAGES = 200
+"""Side-by-side pages are written for the most similar flagged pairs up to this many (a class that shares one
+solution flags thousands of pairs, and thousands of pages help no one)."""
 
 
 @dataclass
@@ -315,7 +318,9 @@ def markdown(report: ClassReport, images: dict[str, str]) -> str:
     """``report.md``: every table, student text escaped; images by file name."""
     def table(head: list[str], rows: list[list[str]], link_last: bool = False) -> list[str]:
         def cell(c: str, last: bool) -> str:  # the link is the report's own file name, never student text
-            return f"[side by side]({c})" if link_last and last else markdown_text(c)
+            if link_last and last:
+                return f"[side by side]({c})" if c else f"not written (after the first {MAX_PAGES})"
+            return markdown_text(c)
         out = ["| " + " | ".join(markdown_text(h) for h in head) + " |", "|" + "---|" * len(head)]
         out += ["| " + " | ".join(cell(c, j == len(row) - 1) for j, c in enumerate(row)) + " |" for row in rows]
         return out + [""]
@@ -366,7 +371,10 @@ def html_page(report: ClassReport, images: dict[str, bytes]) -> str:
     """``report.html``: one offline page, the PNGs as data URIs, no script, every text cell escaped."""
     def table(head: list[str], rows: list[list[str]], link_last: bool = False) -> str:
         def cell(c: str, last: bool) -> str:
-            return f"<a href='{html.escape(c)}'>side by side</a>" if link_last and last else html.escape(c)
+            if link_last and last:
+                return (f"<a href='{html.escape(c)}'>side by side</a>" if c
+                        else f"not written (after the first {MAX_PAGES})")
+            return html.escape(c)
         body = "".join("<tr>" + "".join(f"<td>{cell(c, j == len(row) - 1)}</td>" for j, c in enumerate(row))
                        + "</tr>" for row in rows)
         return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + f"</tr>{body}</table>"
@@ -417,8 +425,9 @@ def compare_and_write(assignment: str, codes: list[StubCode], out_dir: Path, thr
     by_name = {c.name: c.code for c in codes}
     pairs = []
     for number, pair in enumerate(flagged, start=1):
-        page = f"similarity/pair-{number:03d}.html"
-        atomic_write(out_dir / page, pair_page(assignment, pair, by_name[pair.a], by_name[pair.b]))
+        page = f"similarity/pair-{number:03d}.html" if number <= MAX_PAGES else ""
+        if page:
+            atomic_write(out_dir / page, pair_page(assignment, pair, by_name[pair.a], by_name[pair.b]))
         pairs.append((pair, page))
     flagged_keys = {(p.a, p.b) for p in flagged}
     closest = sorted((s for s in scores if (s[0], s[1]) not in flagged_keys), key=lambda s: -min(s[2], s[3]))
