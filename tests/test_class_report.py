@@ -144,7 +144,9 @@ def test_report_of_a_graded_class_equals_a_plain_computation(graded_class):
     folder, out = graded_class
     from autograder.__main__ import main
 
-    assert main(["class-report", "hw0_setup", "--results", str(out)]) == 0
+    gradebook = (out / "gradebook.csv").read_bytes()
+    assert main(["class-report", "hw0_setup", str(folder), "--results", str(out)]) == 0
+    assert (out / "gradebook.csv").read_bytes() == gradebook
     report = analyse("hw0_setup", read_results(out))
     names, stubs, scores, totals = _gradebook(out / "gradebook.csv")
     assert report.table.names == names and report.table.stubs == stubs and "not_json" in names
@@ -171,6 +173,9 @@ def test_report_of_a_graded_class_equals_a_plain_computation(graded_class):
     assert (out / REPORT_DIR / "totals.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / REPORT_DIR / "stubs.png").read_bytes()[:4] == b"\x89PNG"
     assert f"{len(names)} submissions with a score" in md
+    similar = md[md.index("## Similar stub code"):]
+    assert "never changes a grade" in similar and markdown_text("Not compared (1): not_json") in similar
+    assert "| complete | no\\_discount |" in similar  # the wrong variant is the complete sample with one cell changed
     assert "data:image/png;base64," in (out / REPORT_DIR / "report.html").read_text()
 
 

@@ -342,7 +342,7 @@ def _similarity_markdown(sim: Similarity | None, table) -> list[str]:
     out = ["## Similar stub code", ""]
     if sim is None:
         return out + ["Not computed: give the submissions folder (`class-report ID FOLDER --results DIR`).", ""]
-    out += [f"**{NEVER_A_GRADE}**", "", _similarity_summary(sim), ""]
+    out += [f"**{markdown_text(NEVER_A_GRADE)}**", "", markdown_text(_similarity_summary(sim)), ""]
     head, rows = _similarity_rows(sim)
     out += table(head, rows, link_last=True) if rows else []
     if sim.closest:
