@@ -4,10 +4,11 @@ Only the code of the stub cells is compared (matched as grading matches them, by
 :func:`autograder.notebook.find_stubs` on what :func:`autograder.intake.read_code_cells` read safely
 in a child process), joined in the assignment's stub order, so moving cells around changes nothing.
 Fingerprints come from ``copydetect`` (winnowing over Pygments tokens, as MOSS does): names become
-one placeholder and comments and whitespace are dropped before hashing, so renaming variables,
-reordering functions and adding comments leave a copy's fingerprints in place. Every fingerprint
-of the released notebook's code (the stub skeletons, the setup cells) is boilerplate and never
-counts, so an untouched stub matches nothing.
+one placeholder and comments, docstrings and whitespace are dropped before hashing, so renaming
+variables, reordering functions and adding comments leave a copy's fingerprints in place; the
+k-grams are hashed by a fixed function, so a report is the same on every run. Every fingerprint of
+the released notebook's code (the stub skeletons, the setup cells, the public checks) is
+boilerplate and never counts, so an untouched stub matches nothing.
 """
 from __future__ import annotations
 
