@@ -260,3 +260,52 @@ def test_a_padded_stub_cell_is_compared_up_to_the_cap(tmp_path):
     (code,) = read_stub_code(ASSIGNMENT, folder)
     assert not code.problem and "def dagger(" in code.code
     assert len(code.code) < len(course.stub_names(ASSIGNMENT)) * (MAX_STUB_CHARS + 100)
+
+
+HW0_REWRITE = {"discounted_returns": '''
+    r = np.asarray(rewards, dtype=float)
+    out = np.zeros_like(r)
+    running = np.zeros(r.shape[0])
+    for t in range(r.shape[1] - 1, -1, -1):
+        running = r[:, t] + gamma * running
+        out[:, t] = running
+    return out
+''', "episode_returns": '''
+    done = np.asarray(dones, dtype=bool)
+    returns, total = [], 0.0
+    for r, d in zip(np.asarray(rewards, dtype=float), done):
+        total += r
+        if d:
+            returns.append(total)
+            total = 0.0
+    return np.array(returns, dtype=float)
+'''}
+HW0_COPY = {"discounted_returns": '''
+    R = np.asarray(rewards, dtype=float)  # as floats
+    n = R.shape[-1]
+    a, b = np.arange(n)[:, None], np.arange(n)[None, :]
+    M = np.where(a >= b, float(gamma) ** np.maximum(a - b, 0), 0.0)
+    return R @ M  # matrix of discounts
+''', "episode_returns": '''
+    rw = np.asarray(rewards, dtype=float)
+    idx = np.flatnonzero(np.asarray(dones, dtype=bool))  # episode ends
+    cum = np.cumsum(rw)[idx]
+    return np.diff(cum, prepend=0.0)
+'''}
+
+
+def test_short_stubs_a_renamed_copy_is_flagged_and_an_honest_rewrite_is_not():
+    """hw0's two stubs are a few lines each, where honest solutions are most alike."""
+    stubs = course.stub_names("hw0_setup")
+    nb = nbformat.read(str(course.release_notebook("hw0_setup")), as_version=4)
+    cells = {c.metadata["nbgrader"]["grade_id"]: c.source for c in nb.cells
+             if c.metadata.get("nbgrader", {}).get("grade_id") in stubs}
+    solution = nbformat.read(str(course.REPO / "solutions/hw0_setup/hw0_setup.ipynb"), as_version=4)
+    bodies = {c.metadata["nbgrader"]["grade_id"]: re.search(r"### BEGIN SOLUTION\n(.*?)\n\s*### END SOLUTION",
+                                                            c.source, re.S).group(1)
+              for c in solution.cells if c.metadata.get("nbgrader", {}).get("grade_id") in stubs}
+    codes = [StubCode(name, joined_stubs({s: cells[s].replace(STUB_END, b[s].strip("\n")) for s in stubs}, stubs))
+             for name, b in [("solution", bodies), ("copy", HW0_COPY), ("rewrite", HW0_REWRITE)]]
+    flagged, scores = similar_pairs(codes, release_code("hw0_setup"))
+    assert [(p.a, p.b) for p in flagged] == [("solution", "copy")]
+    assert all(max(x, y) < 0.5 for a, b, x, y in scores if "rewrite" in (a, b)), scores
