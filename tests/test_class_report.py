@@ -222,3 +222,13 @@ def test_a_class_with_no_score_is_empty_and_its_figures_undefined():
     assert table.names == [] and table.totals.size == 0
     report = analyse("hw0_setup", {"s7": result("s7", {}, status=GRADER_ERROR)})
     assert report.stub_items == [] and report.stats == {"submissions": 0.0} and report.counts.sum() == 0
+
+
+def test_results_of_two_suite_versions_are_reported_with_a_warning():
+    results = synthetic_class()
+    for name, result_ in results.items():
+        result_.suite_version = "v2" if name == "s1" else "v1"  # s1 regraded after the suite changed
+    assert "2 versions of the hidden suite" in markdown(analyse("hw0_setup", results), {"totals": "", "stubs": ""})
+    for result_ in results.values():
+        result_.suite_version = "v1"
+    assert "versions of the hidden suite" not in markdown(analyse("hw0_setup", results), {"totals": "", "stubs": ""})

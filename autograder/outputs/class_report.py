@@ -84,6 +84,8 @@ class ClassTable:
     attempted: np.ndarray
     """(N, stubs) bools."""
     statuses: Counter = field(default_factory=Counter)
+    suite_versions: set[str] = field(default_factory=set)
+    """The versions of the suite that graded the scored results, where recorded."""
 
 
 def _attempted(stub_tests: list) -> bool:
@@ -114,7 +116,8 @@ def class_table(results: dict[str, GradeResult]) -> ClassTable:
     stub_max = np.array([sum(test_max[k] for k in tests if k[0] == s) for s in stubs])
     return ClassTable(list(scored), np.array([r.score for r in scored.values()]), float(stub_max.sum()), stubs,
                       stub_scores, stub_max, tests, test_scores, test_max_arr, attempted,
-                      Counter(r.status for r in results.values()))
+                      Counter(r.status for r in results.values()),
+                      {v for r in scored.values() if (v := getattr(r, "suite_version", ""))})
 
 
 def item_rest_correlation(scores: np.ndarray, totals: np.ndarray) -> np.ndarray:
@@ -305,6 +308,9 @@ def _intro(report: ClassReport) -> tuple[str, str]:
                f"ungradable and counted at 0); maximum {t.max_total:g} points.")
     left = (f" {s[GRADER_ERROR]} submission(s) where the grader failed are left out: they have no score "
             "(run the batch again)." if s.get(GRADER_ERROR) else "")
+    if len(t.suite_versions) > 1:
+        left += (f" Warning: these results come from {len(t.suite_versions)} versions of the hidden suite (a "
+                 "regrade of some submissions after the suite changed): per-test figures mix them; regrade all.")
     return counted, left
 
 
