@@ -3,6 +3,11 @@ regret and notebook run times. Prints the Markdown tables that the README shows.
 
     python bench/bench_hw3_preferences.py                  # everything (about 15 minutes on 2 cores)
     python bench/bench_hw3_preferences.py --skip-notebook  # without timing the notebook runs
+    python bench/bench_hw3_preferences.py --hopper-only    # only the reward models on the Hopper pairs
+
+The Hopper pairs are the set with falls (``hopper_prefs/hopper_prefs_falls.npz``: a quarter of the pairs
+contain a segment that ends in a fall); held-out accuracy is also split into pairs with a fall and
+upright pairs, each against its own Bayes ceiling.
 
 Every number comes from the reference solutions in ``solutions/hw3_preferences`` run on the shipped
 data (``datasets/items``, ``datasets/hopper_prefs``), with the same budgets as the notebook.
@@ -60,37 +65,49 @@ def bench_recovery(ns: dict, repeats: int = 5) -> None:
               f"{np.abs(out['gd'] - out['mm']).max():.1e} | {1e3 * times['gd']:.1f} ms | {1e3 * times['mm']:.1f} ms |")
 
 
-def bench_reward_models(ns: dict, seeds: int, n_steps: int, counts: list[int], active_counts: list[int]) -> None:
+def bench_reward_models(ns: dict, seeds: int, n_steps: int, counts: list[int], active_counts: list[int],
+                        queries: bool = True) -> None:
     p = load_hopper_preferences()
     obs, act = torch.as_tensor(p.obs), torch.as_tensor(p.act)
     ceiling, test_seg, true_ret = p.info["bayes_ceiling_test"], np.flatnonzero(p.test_segment), p.returns
     train, select = ns["train_reward_model"], ns["select_queries"]
 
-    def evaluate(ens) -> tuple[float, float]:
+    fall_pair = p.terminated[p.test_pairs].any(1)
+
+    def evaluate(ens, split: bool = False) -> tuple[float, ...]:
         with torch.no_grad():
             ret = ens(obs, act).sum(-1).mean(0).numpy()
-        acc = preference_accuracy(ret[p.test_pairs[:, 0]], ret[p.test_pairs[:, 1]], p.test_mu)
-        return acc, pearsonr(ret[test_seg], true_ret[test_seg]).statistic
+        acc = lambda m: preference_accuracy(ret[p.test_pairs[m, 0]], ret[p.test_pairs[m, 1]], p.test_mu[m])
+        out = (acc(np.ones_like(fall_pair)), pearsonr(ret[test_seg], true_ret[test_seg]).statistic)
+        return out + (acc(fall_pair), acc(~fall_pair)) if split else out
 
     info = p.info
     print(f"\n### Reward model on Hopper preferences ({info['n_train_pairs']} training / {info['n_test_pairs']} held-out "
           f"pairs, segments of {info['segment_length']} steps; annotator temperature {info['temperature']}, "
           f"flip rate {info['flip_rate']}, eta {info['log_theta']}; Bayes ceiling {ceiling:.3f}; "
-          f"3-member ensembles, {n_steps} steps per member; mean ± sd over {seeds} seeds)\n")
-    print("| labels | held-out accuracy | fraction of Bayes ceiling | correlation with true return | train time |")
-    print("|---:|---:|---:|---:|---:|")
+          f"3-member ensembles, {n_steps} steps per member; mean ± sd over {seeds} seeds; pairs with a fall: "
+          f"{fall_pair.mean():.0%} of the held-out pairs, ceiling {info['bayes_ceiling_test_fall_pairs']:.3f}; upright "
+          f"pairs: ceiling {info['bayes_ceiling_test_upright_pairs']:.3f})\n")
+    print("| labels | held-out accuracy | fraction of Bayes ceiling | correlation with true return | "
+          "accuracy, pairs with a fall | accuracy, upright pairs | train time |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
     for n in counts:
-        accs, cors, secs = [], [], []
+        accs, cors, secs, falls, uprights = [], [], [], [], []
         for s in range(seeds):
             order = np.random.default_rng(100 + s).permutation(len(p.train_mu))[:n]
             t0 = time.perf_counter()
             ens = train(obs, act, p.train_pairs[order], p.train_mu[order], n_steps=n_steps, seed=s)
             secs.append(time.perf_counter() - t0)
-            acc, cor = evaluate(ens)
+            acc, cor, fall, upright = evaluate(ens, split=True)
             accs.append(acc)
             cors.append(cor)
-        print(f"| {n} | {mean_sd(accs)} | {mean_sd(np.array(accs) / ceiling)} | {mean_sd(cors)} | {np.mean(secs):.1f} s |")
+            falls.append(fall)
+            uprights.append(upright)
+        print(f"| {n} | {mean_sd(accs)} | {mean_sd(np.array(accs) / ceiling)} | {mean_sd(cors)} | {mean_sd(falls)} | "
+              f"{mean_sd(uprights)} | {np.mean(secs):.1f} s |")
 
+    if not queries:
+        return
     pool = random_pairs(np.flatnonzero(~p.test_segment), 4000, np.random.default_rng(7))
     res = {k: np.zeros((seeds, len(active_counts), 2)) for k in ("random", "disagreement")}
     for s in range(seeds):
@@ -159,15 +176,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--bandit-horizon", type=int, default=4000)
     parser.add_argument("--bandit-seeds", type=int, default=5)
     parser.add_argument("--skip-notebook", action="store_true")
+    parser.add_argument("--hopper-only", action="store_true", help="only the reward models on the Hopper pairs")
+    parser.add_argument("--no-queries", action="store_true", help="without the query-selection experiment")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     ns = solution_namespace()
     print(f"## hw3_preferences benchmark (torch threads: 1; {time.strftime('%Y-%m-%d')})")
-    bench_recovery(ns)
-    bench_bandit(ns, args.bandit_horizon, args.bandit_seeds)
+    if not args.hopper_only:
+        bench_recovery(ns)
+        bench_bandit(ns, args.bandit_horizon, args.bandit_seeds)
     n_train = len(load_hopper_preferences().train_mu)
-    bench_reward_models(ns, args.seeds, args.rm_steps, [50, 200, 800, n_train], [50, 100, 200, 400, 800])
-    if not args.skip_notebook:
+    bench_reward_models(ns, args.seeds, args.rm_steps, [50, 200, 800, n_train], [50, 100, 200, 400, 800],
+                        queries=not args.no_queries)
+    if not (args.skip_notebook or args.hopper_only):
         bench_notebook()
 
 

@@ -4,6 +4,14 @@ plus the KL-coefficient and beta sweeps that the notebook plots as precomputed. 
     python bench/bench_hw4_rlhf_dpo.py                 # 3 seeds + sweeps (about 10 minutes on 2 idle cores)
     python bench/bench_hw4_rlhf_dpo.py --seeds 0 --no-sweep --steps 20000   # a quick smoke run
     python bench/bench_hw4_rlhf_dpo.py --record        # also refresh datasets/hw4/precomputed.json + MANIFEST
+    python bench/bench_hw4_rlhf_dpo.py --preference-only   # every setting chosen from preference data (key preference_only)
+
+The first table (the default) was measured on the upright pairs (``hopper_prefs/hopper_prefs.npz``) with
+their reward model (``datasets/hw4/reward_model_upright.pt``) and the offset b = 5 chosen on the true
+return; it stays for comparison. ``--preference-only`` measures the course's protocol on the pairs with
+falls: the offset from the reward model's absorbing state, the KL coefficient and beta from sweeps on
+seed 0 judged by preference data and the policies alone, then every seed at the choices, and the true
+return read once, at the end.
 
 Every run uses the solution notebook's own stubs (``solutions/hw4_rlhf_dpo``) and its budgets with
 ``FAST = False``: PPO for ``PPO_STEPS`` environment steps, DPO for ``DPO_STEPS`` steps. Every RLHF run
@@ -34,6 +42,9 @@ REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "bench" / "results" / "hw4_rlhf_dpo.json"
 PRECOMPUTED = REPO / "datasets" / "hw4" / "precomputed.json"
 FINAL_EPISODES = 20
+UPRIGHT_PREFS = "hopper_prefs/hopper_prefs.npz"  # the first table: the upright pairs, their reward model, b = 5
+UPRIGHT_REWARD_MODEL = "hw4/reward_model_upright.pt"
+UPRIGHT_OFFSET = 5.0
 
 
 def solution_namespace() -> dict:
@@ -46,19 +57,19 @@ def _final(ns: dict, policy, reference, reward_fn=None) -> dict:
 
 
 def job(kind: str, seed: int, value: float, steps: int | None, offset: float | None = None) -> dict:
-    """One run in a fresh worker: ``kind`` in {reward_model, ppo, rlhf, dpo}; ``value`` is the KL
-    coefficient (rlhf) or beta (dpo); ``offset`` is the learned reward's per-step offset b (rlhf;
-    default: the notebook's ``REWARD_OFFSET``)."""
+    """One run of the first table in a fresh worker (the upright pairs and their reward model, as first
+    measured): ``kind`` in {reward_model, ppo, rlhf, dpo}; ``value`` is the KL coefficient (rlhf) or beta
+    (dpo); ``offset`` is the learned reward's per-step offset b (rlhf; default 5, tuned on the true return)."""
     import torch
 
     ns = solution_namespace()
     torch.set_num_threads(1)
     ns["seed_everything"](seed)
-    reference, prefs = ns["load_reference"](), ns["load_hopper_preferences"]()
+    reference, prefs = ns["load_reference"](), ns["load_hopper_preferences"](UPRIGHT_PREFS)
     ppo_steps = steps or ns["PPO_STEPS"]
     out: dict = {"kind": kind, "seed": seed, "value": value, "steps": ppo_steps}
     cpu0 = time.process_time()
-    reward_model = ns["load_reward_model"]()
+    reward_model = ns["load_reward_model"](UPRIGHT_REWARD_MODEL)
     rf = ns["reward_function"](reward_model)
     if kind == "reward_model":  # the shipped model, measured here on the held-out pairs
         seg = rf(prefs.obs.reshape(-1, 11), prefs.act.reshape(-1, 3)).reshape(prefs.obs.shape[:2]).sum(1)
@@ -79,7 +90,7 @@ def job(kind: str, seed: int, value: float, steps: int | None, offset: float | N
     elif kind == "rlhf":
         rm_wall = reward_model.metadata["fit_seconds"]
         meta = reward_model.metadata
-        offset = ns["REWARD_OFFSET"] if offset is None else offset
+        offset = UPRIGHT_OFFSET if offset is None else offset
         wrap = lambda envs: ns["LearnedRewardWrapper"](envs, rf, meta["step_mean"], meta["step_std"], offset)
         out["offset"] = offset
         t0 = time.perf_counter()
@@ -219,6 +230,187 @@ def print_tables(summary: dict, rms: list[dict]) -> None:
               + "; learned return " + " → ".join(f"{v:.0f}" for v in c["learned_return"]))
 
 
+# --------------------------------------------------------------------------- every setting from preference data
+KL_CANDIDATES = (0.01, 0.03, 0.1)
+BETA_CANDIDATES = (0.03, 0.1, 0.3, 1.0)
+PREF_PARTIAL = RESULTS.with_suffix(".preference_only.partial.json")
+
+
+def pref_job(kind: str, seed: int, value: float, steps: int | None, data: str = "falls") -> dict:
+    """One run of the preference-only protocol in a fresh worker. ``pref_rlhf``: PPO on the reward model
+    with an absorbing state (``datasets/hw4/reward_model.pt``), offset ``data_offset`` from its metadata,
+    KL coefficient ``value``. ``pref_dpo``: DPO with beta ``value`` on the pairs with falls (``data="falls"``)
+    or on the upright pairs (``"upright"``). Each records what the protocol may look at (``check``:
+    learned return, disagreement, KL; ``val_accuracy`` for DPO) and, apart, the true ``final`` evaluation."""
+    import torch
+
+    from rlcourse.preferences import HOPPER_PREFS_FILE, HOPPER_PREFS_UPRIGHT_FILE
+    from rlcourse.rlhf import preference_only_check
+
+    ns = solution_namespace()
+    torch.set_num_threads(1)
+    ns["seed_everything"](seed)
+    reference = ns["load_reference"]()
+    prefs = ns["load_hopper_preferences"](HOPPER_PREFS_UPRIGHT_FILE if data == "upright" else HOPPER_PREFS_FILE)
+    reward_model = ns["load_reward_model"]()
+    meta, rf = reward_model.metadata, ns["reward_function"](reward_model)
+    offset = meta["data_offset"]
+    ppo_steps = steps or ns["PPO_STEPS"]
+    out: dict = {"kind": kind, "seed": seed, "value": value, "steps": ppo_steps, "data": data}
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    if kind == "pref_rlhf":
+        cfg = ns["PPOConfig"](total_steps=ppo_steps, n_steps=ns["PPO_ENV_STEPS_PER_ROLLOUT"], seed=seed,
+                              eval_every=10**9, kl_coef=value)
+        wrap = lambda envs: ns["LearnedRewardWrapper"](envs, rf, meta["step_mean"], meta["step_std"], offset)
+        policy, _ = ns["ppo"](reference, reference, ns["compute_gae"], ns["ppo_loss"], cfg, wrap=wrap, verbose=False)
+        out.update(offset=offset, rm_wall=meta["fit_seconds"])
+    elif kind == "pref_dpo":
+        pairs = ns["oriented_pairs"](prefs.obs, prefs.act, prefs.train_pairs, prefs.train_mu)
+        val = ns["oriented_pairs"](prefs.obs, prefs.act, prefs.test_pairs, prefs.test_mu)
+        n = ns["DPO_STEPS"]
+        policy, log = ns["train_dpo"](reference, reference, ns["dpo_loss"], pairs, value, n_steps=n, val=val,
+                                      log_every=max(1, n // 10), seed=seed, verbose=False)
+        out["val_accuracy"] = log.steps[-1].get("val_accuracy")
+    else:
+        raise ValueError(kind)
+    out["wall"] = time.perf_counter() - t0 + out.get("rm_wall", 0.0)
+    out["cpu"] = time.process_time() - cpu0 + out.get("rm_wall", 0.0)
+    out["check"] = preference_only_check(policy, reference, reward_model, offset, n_episodes=5)
+    out["final"] = _final(ns, policy, reference)  # the evaluation: never read by the choices below
+    return out
+
+
+def survival_bonus(ensemble, prefs, offset: float) -> float:
+    """The learned reward's survival bonus per upright step, in the environment's units: regress the learned
+    reward (normalised, plus ``offset``) on the environment's reward minus its healthy bonus 1 over the upright
+    steps of the data; intercept / slope is what it pays for one more upright step with no progress and no
+    control cost (the environment pays exactly 1). An evaluation: it reads the true reward."""
+    meta = ensemble.metadata
+    real = ~prefs.absorbing
+    last = np.zeros_like(real)
+    last[np.flatnonzero(prefs.terminated), prefs.length[prefs.terminated] - 1] = True  # the fall's own step
+    upright = real & ~last
+    learned = (ensemble.predict(prefs.obs[upright], prefs.act[upright]).mean(0) - meta["step_mean"]) / meta["step_std"]
+    slope, intercept = np.polyfit(prefs.rewards[upright] - 1.0, learned + offset, 1)
+    return float(intercept / slope)
+
+
+def preference_only(args, workers: int) -> dict:
+    """Run the protocol: sweep on seed 0, choose the KL coefficient and beta from preference data and the
+    policies alone, run the other seeds at the choices, then read the true returns once for the table."""
+    from rlcourse.preferences import HOPPER_PREFS_UPRIGHT_FILE, load_hopper_preferences
+    from rlcourse.rlhf import choose_beta, choose_kl_coef, disagreement_threshold, load_reward_model
+
+    steps = args.steps
+    done = json.loads(PREF_PARTIAL.read_text()) if PREF_PARTIAL.exists() and not args.fresh else []
+    key = lambda kind, seed, value, data: (kind, seed, value, data)
+    have = {key(r["kind"], r["seed"], r["value"], r["data"]): r for r in done}
+
+    def run(jobs: list[tuple]) -> list[dict]:
+        todo = [j for j in jobs if key(*j[:3], j[4]) not in have]
+        print(f"{len(jobs)} runs ({len(jobs) - len(todo)} reused)", flush=True)
+        if todo:
+            with ProcessPoolExecutor(workers) as pool:
+                futures = {pool.submit(pref_job, *j): j for j in todo}
+                for f in as_completed(futures):
+                    r = f.result()
+                    print(f"  done {r['kind']} {r['data']} seed {r['seed']} value {r['value']:g} wall {r['wall']:.0f} s",
+                          flush=True)
+                    have[key(r["kind"], r["seed"], r["value"], r["data"])] = r
+                    PREF_PARTIAL.write_text(json.dumps(list(have.values()), indent=1))
+        return [have[key(*j[:3], j[4])] for j in jobs]
+
+    prefs = load_hopper_preferences()
+    rm = load_reward_model()
+    real = ~prefs.absorbing
+    test = prefs.test_segment
+    threshold = disagreement_threshold(rm, prefs.obs[test], prefs.act[test], real[test])
+    # 1. sweeps on seed 0: what the protocol may look at
+    sweep = run([("pref_rlhf", 0, c, steps, "falls") for c in KL_CANDIDATES]
+                + [("pref_dpo", 0, b, steps, d) for d in ("falls", "upright") for b in BETA_CANDIDATES])
+    kl_checks = {r["value"]: r["check"] for r in sweep if r["kind"] == "pref_rlhf"}
+    kl = choose_kl_coef(kl_checks, threshold)
+    betas = {d: choose_beta({r["value"]: r["val_accuracy"] for r in sweep if r["kind"] == "pref_dpo" and r["data"] == d})
+             for d in ("falls", "upright")}
+    print(f"chosen from preference data: KL coefficient {kl:g} (disagreement threshold {threshold:.3f}), "
+          f"beta {betas['falls']:g} (pairs with falls), {betas['upright']:g} (upright pairs)", flush=True)
+    # 2. the other seeds at the choices
+    final = run([("pref_rlhf", s, kl, steps, "falls") for s in args.seeds]
+                + [("pref_dpo", s, betas[d], steps, d) for d in ("falls", "upright") for s in args.seeds])
+    # 3. the evaluation, once
+    saved = json.loads(RESULTS.read_text())
+    ppo_runs = {r["seed"]: r for r in saved["runs"] if r["kind"] == "ppo" and r["steps"] == (steps or 200_000)}
+    ppo_returns = [ppo_runs[s]["final"]["return"] for s in args.seeds]
+    ppo_mean = float(np.mean(ppo_returns))
+    methods = {}
+    for name, kind, data in (("RLHF", "pref_rlhf", "falls"), ("DPO, pairs with falls", "pref_dpo", "falls"),
+                             ("DPO, upright pairs", "pref_dpo", "upright")):
+        rs = [r for r in final if r["kind"] == kind and r["data"] == data]
+        rets = [r["final"]["return"] for r in rs]
+        methods[name] = {"value": rs[0]["value"], "seeds": [r["seed"] for r in rs], "returns": rets,
+                         "return_mean": float(np.mean(rets)), "return_std": float(np.std(rets)),
+                         "fraction_of_true_reward_ppo": float(np.mean(rets)) / ppo_mean,
+                         "kls": [r["final"]["kl"] for r in rs], "lengths": [r["final"]["length"] for r in rs],
+                         "walls": [r["wall"] for r in rs], "cpus": [r["cpu"] for r in rs],
+                         "val_accuracy": [r.get("val_accuracy") for r in rs]}
+    old_rm = load_reward_model("hw4/reward_model_upright.pt")
+    upright_prefs = load_hopper_preferences(HOPPER_PREFS_UPRIGHT_FILE)
+    meta = rm.metadata
+    out = {
+        "protocol": "offset b = the reward model's data_offset (its absorbing state pays 0); KL coefficient: among "
+                    f"{list(KL_CANDIDATES)} (seed 0), the highest learned return among policies whose mean ensemble "
+                    "disagreement is at most the 90% quantile of held-out segments'; beta: among "
+                    f"{list(BETA_CANDIDATES)} (seed 0), the best held-out preference accuracy (ties within 0.005: "
+                    "the largest beta); then every seed at the choices; true returns read once, after",
+        "kl_coef": kl, "beta": betas["falls"], "beta_upright": betas["upright"], "offset": meta["data_offset"],
+        "disagreement_threshold": threshold, "kl_checks": {str(c): ch for c, ch in kl_checks.items()},
+        "beta_val_accuracy": {d: {str(r["value"]): r["val_accuracy"] for r in sweep
+                                  if r["kind"] == "pref_dpo" and r["data"] == d} for d in ("falls", "upright")},
+        "sweep_true_returns": {f"{r['kind']} {r['data']} {r['value']:g}": r["final"]["return"] for r in sweep},
+        "reward_model": {k: meta[k] for k in ("test_accuracy", "bayes_ceiling_test", "return_correlation",
+                                              "absorbing_reward", "data_offset", "fit_seconds")},
+        "survival_bonus": {"learned, data offset": survival_bonus(rm, prefs, meta["data_offset"]),
+                           "upright model, b = 5": survival_bonus(old_rm, upright_prefs, 5.0),
+                           "upright model, b = 0": survival_bonus(old_rm, upright_prefs, 0.0),
+                           "environment": 1.0},
+        "ppo_true_reward": {"seeds": list(args.seeds), "returns": ppo_returns, "return_mean": ppo_mean},
+        "methods": methods,
+        "fraction_of_true_reward_ppo": methods["RLHF"]["fraction_of_true_reward_ppo"],
+        "returns": methods["RLHF"]["returns"],
+        "runs": sweep + [r for r in final if r not in sweep],
+    }
+    saved["preference_only"] = out
+    RESULTS.write_text(json.dumps(saved, indent=1))
+    PREF_PARTIAL.unlink(missing_ok=True)
+    print_preference_only(out)
+    return out
+
+
+def print_preference_only(out: dict) -> None:
+    print(f"\n### hw4_rlhf_dpo, every setting from preference data ({out['protocol']})\n")
+    print(f"offset b = {out['offset']:.2f} (data), KL coefficient {out['kl_coef']:g}, beta {out['beta']:g} "
+          f"(upright pairs: {out['beta_upright']:g}); reward model held-out accuracy "
+          f"{out['reward_model']['test_accuracy']:.3f} (ceiling {out['reward_model']['bayes_ceiling_test']:.3f})\n")
+    ppo = out["ppo_true_reward"]
+    print("| method | setting | seeds | true return | per seed | % of true-reward PPO | KL (nats/step) | CPU s |")
+    print("|---|---|---:|---:|---|---:|---:|---:|")
+    print(f"| PPO, true reward | – | {len(ppo['returns'])} | {ppo['return_mean']:.0f} ± {np.std(ppo['returns']):.0f} | "
+          + ", ".join(f"{v:.0f}" for v in ppo["returns"]) + " | 100% | – | – |")
+    for name, m in out["methods"].items():
+        setting = (f"b = {out['offset']:.2f}, KL {m['value']:g}" if name == "RLHF" else f"β = {m['value']:g}")
+        print(f"| {name} | {setting} | {len(m['returns'])} | {m['return_mean']:.0f} ± {m['return_std']:.0f} | "
+              + ", ".join(f"{v:.0f}" for v in m["returns"])
+              + f" | {100 * m['fraction_of_true_reward_ppo']:.0f}% | {np.mean(m['kls']):.3f} | {np.mean(m['cpus']):.0f} |")
+    print("\nKL sweep, seed 0 (what the choice saw): " + "; ".join(
+        f"{c}: learned return {ch['learned_return']:.0f}, disagreement {ch['disagreement']:.3f}, KL {ch['kl']:.3f}"
+        for c, ch in out["kl_checks"].items()) + f" (threshold {out['disagreement_threshold']:.3f})")
+    print("Beta sweep, seed 0, held-out accuracy: " + "; ".join(
+        f"{d}: " + ", ".join(f"{b} → {a:.3f}" for b, a in accs.items()) for d, accs in out["beta_val_accuracy"].items()))
+    print("Sweep true returns (read after the choice): " + "; ".join(f"{k}: {v:.0f}" for k, v in out["sweep_true_returns"].items()))
+    print("Survival bonus per upright step (environment: 1): " + "; ".join(
+        f"{k} {v:.2f}" for k, v in out["survival_bonus"].items()))
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -235,6 +427,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--workers", type=int, default=2, help="runs at a time (wall times grow when they share cores)")
     p.add_argument("--record", action="store_true", help="write datasets/hw4/precomputed.json and record it")
     p.add_argument("--smoke", action="store_true", help="the notebook's FAST budgets, results not written")
+    p.add_argument("--preference-only", action="store_true",
+                   help="only the runs whose every setting is chosen from preference data (key preference_only)")
     p.add_argument("--tables-only", action="store_true", help="reprint (and with --record, re-record) the tables "
                    "from bench/results/hw4_rlhf_dpo.json without running anything")
     args = p.parse_args(argv)
@@ -243,11 +437,19 @@ def main(argv: list[str] | None = None) -> None:
         global RESULTS, FINAL_EPISODES
         RESULTS, FINAL_EPISODES = Path(os.environ.get("TMPDIR", "/tmp")) / "hw4_bench_smoke.json", 2
 
+    if args.preference_only:
+        out = (json.loads(RESULTS.read_text())["preference_only"] if args.tables_only
+               else preference_only(args, args.workers))
+        if args.tables_only:
+            print_preference_only(out)
+        if args.record:
+            _record_preference_only(out, args)
+        return
     ns = solution_namespace()
     steps, dpo_steps = args.steps or ns["PPO_STEPS"], ns["DPO_STEPS"]
     args.kl = ns["KL_COEF"] if args.kl is None else args.kl
     args.beta = ns["BETA"] if args.beta is None else args.beta
-    offset = ns["REWARD_OFFSET"]
+    offset = UPRIGHT_OFFSET
     if args.tables_only:
         saved = json.loads(RESULTS.read_text())
         ref_row = saved["summary"]["table"][0]
@@ -289,10 +491,27 @@ def main(argv: list[str] | None = None) -> None:
         _record(summary, vars(args))
 
 
+def _record_preference_only(out: dict, args) -> None:
+    """Add the protocol's results (without the per-run curves) to the notebook's precomputed file, re-record it."""
+    from rlcourse import data
+
+    pre = json.loads(PRECOMPUTED.read_text())
+    pre["preference_only"] = {k: v for k, v in out.items() if k != "runs"}
+    PRECOMPUTED.write_text(json.dumps(pre, indent=1) + "\n")
+    entry = data.read_manifest()["hw4/precomputed.json"]
+    data.add(PRECOMPUTED, entry["command"] + "; python bench/bench_hw4_rlhf_dpo.py --preference-only --record "
+             f"--seeds {' '.join(map(str, args.seeds))} --workers {args.workers}", entry["seed"],
+             {**entry["info"], "preference_only": "every setting chosen from preference data (bench --preference-only)"})
+    print(f"recorded {PRECOMPUTED.relative_to(REPO)} (key preference_only)")
+
+
 def _record(summary: dict, args: dict) -> None:
     """Write the notebook's precomputed file and record it in the MANIFEST."""
     from rlcourse import data
 
+    kept = json.loads(PRECOMPUTED.read_text()) if PRECOMPUTED.exists() else {}
+    if "preference_only" in kept:  # written by --preference-only --record: keep it
+        summary = {**summary, "preference_only": kept["preference_only"]}
     PRECOMPUTED.write_text(json.dumps(summary, indent=1) + "\n")
     cmd = "python bench/bench_hw4_rlhf_dpo.py --record " + " ".join(
         [f"--seeds {' '.join(map(str, args['seeds']))}", f"--kl {args['kl']:g} --beta {args['beta']:g}",

@@ -5,7 +5,8 @@ import torch
 from scipy.special import expit
 
 from rlcourse import data
-from rlcourse.preferences import (ITEMS_FILE, HOPPER_PREFS_FILE, DuelingBandit, RewardEnsemble, dueling_regret,
+from rlcourse.preferences import (ITEMS_FILE, HOPPER_PREFS_FILE, HOPPER_PREFS_UPRIGHT_FILE, DuelingBandit,
+                                  RewardEnsemble, dueling_regret,
                                   expected_bayes_accuracy, load_hopper_preferences, load_items, preference_accuracy,
                                   random_pairs, rao_kupper_probabilities, sample_labels, simulate_annotator,
                                   uniform_pairs, win_counts)
@@ -148,6 +149,17 @@ def test_hopper_preferences_data():
     assert 0.6 < info["bayes_ceiling_test"] < 1.0 and len(p.source_names) == p.source.max() + 1
     assert p.rollout_obs.shape[:2] == p.rollout_rewards.shape and (p.rollout_length > 0).all()
     assert data.verify(HOPPER_PREFS_FILE).stat().st_size < 10e6
+    # falls: absorbing steps pay nothing and carry no action; every pair split has pairs with a fall
+    assert p.terminated.dtype == bool and p.terminated.sum() == info["n_fall_segments"] > 0
+    assert (p.length[~p.terminated] == length).all() and (p.length[p.terminated] < length).all()
+    assert (p.rewards[p.absorbing] == 0).all() and (p.act[p.absorbing] == 0).all()
+    assert np.isclose(p.terminated[p.train_pairs].any(1).mean(), info["fall_pair_fraction_train"], atol=1e-4)
+    assert 0.1 < info["fall_pair_fraction_test"] < 0.5
+    upright = load_hopper_preferences(HOPPER_PREFS_UPRIGHT_FILE)
+    assert not upright.terminated.any() and not upright.absorbing.any()
+    n_old = len(upright.obs)
+    assert np.array_equal(p.train_pairs[: len(upright.train_pairs)], upright.train_pairs), "the upright pairs are kept"
+    assert np.array_equal(p.rewards[:n_old], upright.rewards) and not p.terminated[:n_old].any()
 
 
 def test_hopper_annotate_reproduces_annotator_statistics():

@@ -71,11 +71,55 @@ def test_shipped_reward_model_is_verified_and_near_the_annotator():
     meta = model.metadata
     assert isinstance(model, RewardEnsemble) and not any(p.requires_grad for p in model.parameters())
     prefs = load_hopper_preferences()
-    seg = reward_function(model)(prefs.obs.reshape(-1, 11), prefs.act.reshape(-1, 3)).reshape(prefs.obs.shape[:2])
+    seg = model.predict(prefs.obs, prefs.act, prefs.absorbing).mean(0)
     i, j = prefs.test_pairs.T
     accuracy = preference_accuracy(seg.sum(1)[i], seg.sum(1)[j], prefs.test_mu)
     assert abs(accuracy - meta["test_accuracy"]) < 1e-3 and accuracy > meta["bayes_ceiling_test"] - 0.03
-    assert abs(seg.mean() - meta["step_mean"]) < 1e-3 and abs(seg.std() - meta["step_std"]) < 1e-3
+    real = seg[~prefs.absorbing]
+    assert abs(real.mean() - meta["step_mean"]) < 1e-3 and abs(real.std() - meta["step_std"]) < 1e-3
+    # the absorbing state: its learned reward, and the offset that makes it pay 0 after normalisation
+    absorbing = float(model.absorbing_value().mean())
+    assert np.isclose(absorbing, meta["absorbing_reward"], atol=1e-5) and np.allclose(seg[prefs.absorbing], absorbing)
+    assert np.isclose((absorbing - meta["step_mean"]) / meta["step_std"] + meta["data_offset"], 0.0, atol=1e-6)
+    assert meta["data_offset"] > 0, "a fall should cost more than an average upright step"
+
+
+def test_upright_reward_model_is_kept_for_the_first_table():
+    model = load_reward_model("hw4/reward_model_upright.pt")
+    assert not model.has_absorbing and model.metadata["data"] == "hopper_prefs/hopper_prefs.npz"
+
+
+def test_reward_model_script_fits_the_absorbing_constant():
+    """Synthetic segments whose true per-step reward is obs[0] + 1 while upright and 0 after a fall. With pairs
+    that contain falls, the fitted model pays an upright step with obs[0] = 0 one unit of obs[0] more than the
+    absorbing state: (intercept - absorbing) / slope of its per-step reward is near 1, the true survival bonus."""
+    rng = np.random.default_rng(1)
+    n, L = 400, 10
+    obs, act = rng.normal(size=(n, L, 11)).astype(np.float32), rng.normal(size=(n, L, 3)).astype(np.float32)
+    length = np.where(rng.random(n) < 0.4, rng.integers(1, L, size=n), L)
+    absorbing = np.arange(L) >= length[:, None]
+    step = np.where(absorbing, 0.0, obs[..., 0] + 1.0)
+    returns = step.sum(1)
+    pairs = rng.integers(0, n, size=(4000, 2))
+    mu = (rng.random(4000) < 1 / (1 + np.exp(-(returns[pairs[:, 0]] - returns[pairs[:, 1]])))).astype(np.float32)
+    ens = _reward_model_script().fit(obs, act, pairs, mu, n_members=2, hidden=[32], n_steps=1500, batch_size=128,
+                                     lr=3e-3, weight_decay=0.0, seed=0, absorbing=absorbing)
+    per_step = ens.predict(obs, act)[:, ~absorbing]  # (2, real steps), normalised
+    for k, absorbing_value in enumerate(ens.absorbing_value()):
+        slope, intercept = np.polyfit(obs[..., 0][~absorbing], per_step[k], 1)
+        assert abs((intercept - absorbing_value) / slope - 1.0) < 0.15, (k, intercept, absorbing_value, slope)
+
+
+def test_choices_from_preference_data_follow_the_stated_rules():
+    from rlcourse.rlhf import choose_beta, choose_kl_coef
+
+    checks = {0.01: {"learned_return": 900.0, "disagreement": 0.5}, 0.03: {"learned_return": 700.0, "disagreement": 0.2},
+              0.1: {"learned_return": 400.0, "disagreement": 0.1}}
+    assert choose_kl_coef(checks, 0.3) == 0.03  # the best covered policy, not the best learned return overall
+    assert choose_kl_coef(checks, 1.0) == 0.01
+    assert choose_kl_coef(checks, 0.05) == 0.1  # none covered: the largest coefficient
+    assert choose_beta({0.03: 0.80, 0.1: 0.83, 0.3: 0.828, 1.0: 0.79}) == 0.3  # within 0.005 of the best: the largest
+    assert choose_beta({0.03: 0.80, 0.1: 0.83, 0.3: 0.82}) == 0.1
 
 
 def test_reward_model_save_and_load_round_trip(tmp_path, monkeypatch):

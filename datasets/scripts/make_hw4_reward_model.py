@@ -45,7 +45,8 @@ OUT = data.DATASETS / REWARD_MODEL_FILE
 def segment_bt_loss(member, obs_a, act_a, obs_b, act_b, mu, absorbing_a=None, absorbing_b=None) -> torch.Tensor:
     """Mean Bradley–Terry negative log-likelihood of labels ``mu`` for segment pairs ``(a, b)``; the
     ``absorbing`` masks (or None) mark steps after a fall."""
-    d = member(obs_a, act_a, absorbing_a).sum(-1) - member(obs_b, act_b, absorbing_b).sum(-1)
+    score = lambda obs, act, absorbing: (member(obs, act) if absorbing is None else member(obs, act, absorbing)).sum(-1)
+    d = score(obs_a, act_a, absorbing_a) - score(obs_b, act_b, absorbing_b)
     return -(mu * F.logsigmoid(d) + (1 - mu) * F.logsigmoid(-d)).mean()
 
 
