@@ -2,6 +2,10 @@
 
   grade ID NOTEBOOK --out DIR        grade one submission; per-stub summary, results.json, feedback.md
   batch ID FOLDER --out DIR --jobs N grade a folder (resumable), write gradebook.csv
+        [--shard K/N]                only the submissions of shard K of N (one copy per machine)
+  merge ID SHARD_DIR ... --out DIR   join the shards of a batch into one gradebook (refuses a mismatch)
+  prairielearn ID [--root /grade]    grade as PrairieLearn's external grader (results/results.json);
+        [--question-files DIR]       or write the question's files for a PrairieLearn course
   demo                               grade the sample submissions of every assignment (the README's main job)
   gradescope ID [--out ZIP]          build the Gradescope autograder bundle
   run NOTEBOOK [-p NAME=VALUE ...]   execute a notebook with parameters under a time budget
@@ -83,11 +87,18 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 
     from autograder.results import GRADED, GRADER_ERROR, UNGRADABLE
 
-    results = run_batch(args.assignment, args.folder, args.out, jobs=args.jobs)
+    from autograder.batch import Shard
+
+    try:
+        shard = Shard.parse(args.shard) if args.shard else Shard()
+    except ValueError as err:
+        raise SystemExit(str(err)) from err
+    results = run_batch(args.assignment, args.folder, args.out, jobs=args.jobs, shard=shard)
     _warn_isolation("none" if any(r.isolation == "none" for r in results) else "full")
     count = {status: sum(r.status == status for r in results) for status in (GRADED, UNGRADABLE, GRADER_ERROR)}
     print(f"{len(results)} submissions ({count[GRADED]} graded, {count[UNGRADABLE]} ungradable, "
-          f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {args.out / GRADEBOOK_NAME}")
+          f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {args.out / shard.gradebook_name}"
+          + (f"\nshard {shard.k} of {shard.n}: join the shards with python -m autograder merge" if shard.n > 1 else ""))
     if count[GRADER_ERROR]:
         failed = next(r for r in results if r.status == GRADER_ERROR)
         print(f"the grader failed on {count[GRADER_ERROR]} submission(s), e.g. {plain(failed.submission)}: "
@@ -96,6 +107,24 @@ def _cmd_batch(args: argparse.Namespace) -> int:
               "to grade just those", file=sys.stderr)
         return GRADER_FAULT_EXIT
     return 0
+
+
+def _cmd_merge(args: argparse.Namespace) -> int:
+    from autograder.outputs.merge import merge
+
+    results = merge(args.assignment, args.shards, args.out)
+    print(f"merged {len(results)} submissions into {args.out / 'gradebook.csv'}")
+    return 0
+
+
+def _cmd_prairielearn(args: argparse.Namespace) -> int:
+    from autograder.prairielearn import question_files, run
+
+    if args.question_files is not None:
+        for path in question_files(args.assignment, args.question_files, image=args.image):
+            print(f"wrote {path}")
+        return 0
+    return run(args.assignment, args.root)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -163,7 +192,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("folder", type=Path)
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--shard", default=None, metavar="K/N",
+                   help="grade only shard K of N (split by submission name); join shards with `merge`")
     p.set_defaults(fn=_cmd_batch)
+    p = sub.add_parser("merge", help="join the shards of a batch into one gradebook")
+    p.add_argument("assignment")
+    p.add_argument("shards", type=Path, nargs="+", help="the shards' --out folders (or one folder they share)")
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(fn=_cmd_merge)
+    p = sub.add_parser("prairielearn", help="grade one submission as PrairieLearn's external grader")
+    p.add_argument("assignment")
+    p.add_argument("--root", type=Path, default=Path("/grade"), help="PrairieLearn's grading folder")
+    p.add_argument("--question-files", type=Path, default=None, metavar="COURSE_DIR",
+                   help="instead of grading, write the question's info.json, question.html and run.sh here")
+    p.add_argument("--image", default="rlcourse-grader", help="the grading image named in info.json")
+    p.set_defaults(fn=_cmd_prairielearn)
     p = sub.add_parser("demo", help="grade every assignment's sample submissions")
     p.add_argument("--out", type=Path, default=Path("build/demo"))
     p.add_argument("--jobs", type=int, default=2)

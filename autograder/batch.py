@@ -7,6 +7,7 @@ entry of the folder is one submission, named by its file or folder name.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import multiprocessing as mp
 import os
@@ -27,6 +28,37 @@ from autograder.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderErro
 from rlcourse.progress import progress as shown_progress
 
 GRADEBOOK_NAME = "gradebook.csv"
+MANIFEST_PATTERN = "_batch-{k}-of-{n}.json"
+"""What a batch (``1-of-1``) or one shard of one graded: the assignment, the suite version, the submissions.
+The ``_`` keeps it apart from the submissions' folders (their safe names never start with one)."""
+
+
+@dataclass(frozen=True)
+class Shard:
+    """Shard ``k`` of ``n`` (1-based): the submissions whose name hashes to ``k``, for N copies of one command."""
+    k: int = 1
+    n: int = 1
+
+    @classmethod
+    def parse(cls, text: str) -> "Shard":
+        """``"K/N"`` with 1 <= K <= N."""
+        match = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text)
+        if not match or not 1 <= int(match[1]) <= int(match[2]):
+            raise ValueError(f"a shard is K/N with 1 <= K <= N (shard 2 of 3 is 2/3), not {text!r}")
+        return cls(int(match[1]), int(match[2]))
+
+    def owns(self, name: str) -> bool:
+        """Whether submission ``name`` (its safe name) falls in this shard: a hash of the name, so every
+        copy of the command splits a folder the same way, whatever order it lists the folder in."""
+        return int.from_bytes(hashlib.sha256(name.encode()).digest()[:8], "big") % self.n == self.k - 1
+
+    @property
+    def gradebook_name(self) -> str:
+        return GRADEBOOK_NAME if self.n == 1 else f"gradebook-{self.k}-of-{self.n}.csv"
+
+    @property
+    def manifest_name(self) -> str:
+        return MANIFEST_PATTERN.format(k=self.k, n=self.n)
 
 
 @dataclass
@@ -179,15 +211,39 @@ def _done(out_dir: Path, name: str) -> bool:
 
 def _unscored(assignment: str, entry: Entry, reason: str, status: str) -> GradeResult:
     """A result with no tests run: ``ungradable`` (the submission's fault) or ``grader_error`` (ours)."""
-    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=status)
+    return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=status,
+                       suite_version=course.suite_version(assignment))
 
 
-def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True) -> list[GradeResult]:
-    """Grade every submission not yet graded in ``out_dir``, then write the gradebook of all of them."""
+def names_digest(names: list[str]) -> str:
+    """One digest of a folder's submission names: shards that saw different folders are never merged."""
+    return hashlib.sha256("\0".join(sorted(names)).encode()).hexdigest()[:16]
+
+
+def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list[str], names: list[str]) -> None:
+    from autograder.report import atomic_write
+
+    manifest = {"assignment": assignment, "suite_version": course.suite_version(assignment),
+                "shard": [shard.k, shard.n], "folder_submissions": len(all_names),
+                "folder_digest": names_digest(all_names), "submissions": sorted(names)}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write(out_dir / shard.manifest_name, json.dumps(manifest, indent=1))
+
+
+def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True,
+              shard: Shard = Shard()) -> list[GradeResult]:
+    """Grade every submission (of ``shard``) not yet graded in ``out_dir``, then write the gradebook of them all.
+
+    A shard writes its own gradebook (``gradebook-K-of-N.csv``) and manifest, so N shards may share one
+    ``out_dir`` on a shared disk or each have their own; ``python -m autograder merge`` joins them.
+    """
     out_dir = Path(out_dir)
     course.check_assignment(assignment)
     expected = course.stub_names(assignment)
     entries = discover(folder, assignment, expected)
+    all_names = [e.name for e in entries]
+    entries = [e for e in entries if shard.owns(e.name)]
+    write_manifest(out_dir, assignment, shard, all_names, [e.name for e in entries])
     todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):
@@ -219,5 +275,6 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
         write_outputs(_unscored(assignment, e, "the grading process died repeatedly on this submission", GRADER_ERROR),
                       out_dir / e.name)
     results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
-    write_gradebook(results, out_dir / GRADEBOOK_NAME, expected)
+    write_gradebook(results, out_dir / shard.gradebook_name, expected)
     return results
+

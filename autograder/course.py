@@ -104,3 +104,22 @@ def sandbox_view(hide: "Iterable[Path]" = ()) -> "View":
     owner = INSTALLED.stat()
     return View(outermost, sorted({str(p) for p in (*masked, *(m.resolve() for m in masked))}),
                 (owner.st_uid, owner.st_gid))
+
+
+def suite_version(assignment: str) -> str:
+    """A digest of what decides a grade: the hidden suite's files, its limits, the solution and the release.
+
+    Recorded by every batch (and shard of one): results graded under different versions are never merged.
+    """
+    import hashlib
+
+    digest = hashlib.sha256()
+    suite = suite_dir(assignment)
+    files = [(f"suite/{p.relative_to(suite).as_posix()}", p) for p in sorted(suite.rglob("*"))
+             if p.is_file() and "__pycache__" not in p.parts and not p.name.endswith(".pyc")]
+    files += [("solution", solution_notebook(assignment)), ("release", release_notebook(assignment))]
+    for name, path in files:
+        data = path.read_bytes()
+        digest.update(f"{name}\0{len(data)}\0".encode())
+        digest.update(data)
+    return digest.hexdigest()[:16]

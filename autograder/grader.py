@@ -28,8 +28,8 @@ from autograder.notebook import find_stubs, imported_modules, manual_cells, read
 from autograder.results import (GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, StubResult, TestOutcome)
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
-from autograder.session import (HELPERS, Cell, CellStatus, LocalTransport, Namespace, SandboxFailure,
-                                SandboxTimeout, Session, StudentError)
+from autograder.session import (HELPERS, Cell, CellStatus, LocalTransport, Namespace, ReferenceCache,
+                                SandboxFailure, SandboxTimeout, Session, StudentError)
 from autograder.supervisor import Zygote
 
 FAST_PARAMETERS = {"FAST": True}
@@ -38,6 +38,11 @@ SANDBOX_HELPERS = "sandbox_helpers.py"
 SUITE_LOG_CHARS = 3000
 """The end of pytest's own output quoted when a suite cannot run (the traceback that matters is last)."""
 REFERENCE_ERROR_CHARS = 300
+UNUSED_PYTEST_PLUGINS = ("doctest", "junitxml", "pastebin", "legacypath", "unittest", "faulthandler", "stepwise",
+                         "lfplugin", "setuponly", "setupplan", "debugging", "logging", "unraisableexception",
+                         "threadexception")
+"""pytest's plugins a hidden suite never needs: each costs every grading time (a suite is plain test functions
+whose only fixtures are ours; feedback is built from the exception, so pytest formats no traceback: ``--tb=no``)."""
 """How much of an exception's text is quoted when a check cannot read a result, or a reference stand-in fails."""
 
 
@@ -189,6 +194,8 @@ class Grader:
             self.close()
             raise
         self.dependencies = stub_dependencies(assignment, self.expected)
+        self.version = course.suite_version(assignment)
+        self.reference_cache = ReferenceCache()
 
     def _reference_call(self, name: str, tree: Any, blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
         """Run reference ``name`` for a stand-in in the sandbox; plain data in and out, never handles."""
@@ -228,7 +235,7 @@ class Grader:
         with no score; an unreadable submission as ``ungradable``."""
         start = time.monotonic()
         path = Path(path)
-        result = GradeResult(self.assignment, name or path.name, [], list(self.manual))
+        result = GradeResult(self.assignment, name or path.name, [], list(self.manual), suite_version=self.version)
         try:
             nb, notes = read_code_cells(path)
         except NotebookError as err:
@@ -250,7 +257,7 @@ class Grader:
                 self._blame_setup(session, broken_setup[0])
             result.isolation = session.isolation
             plugin = SuitePlugin(Namespace(session, "student"),
-                                 Namespace(LocalTransport(self.reference_ns, self.helpers), "reference"), session.status,
+                                 Namespace(LocalTransport(self.reference_ns, self.helpers, self.reference_cache), "reference"), session.status,
                                  session, self.dependencies)
             self._run_suite(plugin)
             if plugin.grader_faults:
@@ -285,14 +292,14 @@ class Grader:
         """A result that says the grader failed: no stubs, no score (see :mod:`autograder.results`)."""
         seconds = 0.0 if start is None else time.monotonic() - start
         return GradeResult(self.assignment, name, [], list(self.manual), list(notes), reason, seconds=seconds,
-                           status=GRADER_ERROR)
+                           status=GRADER_ERROR, suite_version=self.version)
 
     def _run_suite(self, plugin: SuitePlugin, *extra: str) -> None:
         suite = self.suite
         # Plain asserts: a failed check's message is exactly the suite's text, the feedback the student reads.
         args = [str(suite), *extra, "-q", "-p", "no:cacheprovider", "--import-mode=importlib", "-c", os.devnull,
                 "--rootdir", str(suite), "-o", "python_files=test_*.py", "-W", "ignore::DeprecationWarning",
-                "--assert=plain"]
+                "--assert=plain", "--tb=no", "-s", *(f"-pno:{name}" for name in UNUSED_PYTEST_PLUGINS)]
         log = io.StringIO()
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             code = pytest.main(args, plugins=[plugin])
@@ -312,7 +319,7 @@ class Grader:
         """A result with every hidden test failed for ``reason``: the submission stays in the gradebook."""
         failed = [TestOutcome(t.name, t.stub, t.points, False, reason, t.hint) for t in self.catalogue]
         return GradeResult(self.assignment, name, self._collect(failed), list(self.manual), list(notes), reason,
-                           status=UNGRADABLE)
+                           status=UNGRADABLE, suite_version=self.version)
 
     def _ungradable(self, result: GradeResult, reason: str, start: float) -> GradeResult:
         out = self.ungradable(result.submission, reason, result.notes)

@@ -59,6 +59,8 @@ class GradeResult:
     isolation: str = "unknown"
     seconds: float = 0.0
     status: str = GRADED
+    suite_version: str = ""
+    """:func:`autograder.course.suite_version` of the suite that graded it (empty in results older than it)."""
 
     @property
     def score(self) -> float:
@@ -85,4 +87,5 @@ def result_from_dict(data: dict[str, Any]) -> GradeResult:
     stubs = [StubResult(s["name"], [TestOutcome(**t) for t in s["tests"]], s.get("note", "")) for s in data["stubs"]]
     status = data.get("status", UNGRADABLE if data["error"] else GRADED)
     return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
-                       data["notes"], data["error"], data["isolation"], data["seconds"], status)
+                       data["notes"], data["error"], data["isolation"], data["seconds"], status,
+                       str(data.get("suite_version", "")))

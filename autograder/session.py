@@ -9,6 +9,8 @@ spreads to another. :class:`Namespace` is the proxy the suites see as
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
@@ -201,26 +203,74 @@ def _decode_reply(transport: Transport, header: dict[str, Any], blobs: list[byte
                   lambda id, type_name: Handle(transport, id, type_name, transport.generation))
 
 
+class ReferenceCache:
+    """Answers of the reference to calls it has seen, kept for the life of a :class:`~autograder.grader.Grader`.
+
+    A hidden test asks the reference the same question for every submission (its inputs come from a seed,
+    not from the student), so a batch computes each answer once. Only a call of a notebook function by name
+    whose arguments and answer are plain data (arrays, numbers, containers: no handle, no lent object, so
+    no generator whose state would advance) is kept; the answer is decoded afresh for every caller, so a
+    test that changes what it received changes nothing kept. At most ``max_bytes`` of answers are kept.
+    """
+
+    def __init__(self, max_bytes: int = 256 * 2**20) -> None:
+        self.answers: dict[str, tuple[Any, list[bytes]]] = {}
+        self.max_bytes, self.bytes, self.hits = max_bytes, 0, 0
+
+    @staticmethod
+    def key(header: dict[str, Any], blobs: list[bytes]) -> str | None:
+        if header.get("op") != "call" or type(header.get("target")) is not str or "." in header["target"]:
+            return None
+        text = json.dumps(header, sort_keys=True)
+        if '"$handle"' in text or '"$lent"' in text:
+            return None
+        digest = hashlib.sha256(text.encode())
+        for blob in blobs:
+            digest.update(len(blob).to_bytes(8, "big"))
+            digest.update(blob)
+        return digest.hexdigest()
+
+    def get(self, key: str | None) -> tuple[Any, list[bytes]] | None:
+        answer = self.answers.get(key) if key is not None else None
+        self.hits += answer is not None
+        return answer
+
+    def put(self, key: str | None, tree: Any, blobs: list[bytes]) -> None:
+        size = sum(map(len, blobs))
+        if key is None or self.bytes + size > self.max_bytes or '"$handle"' in json.dumps(tree):
+            return
+        self.answers[key] = (tree, blobs)
+        self.bytes += size
+
+
 class LocalTransport(Transport):
     """Runs requests against an in-process namespace (the reference), through the same encoding.
 
     Any exception here is the reference's: it becomes a :class:`ReferenceFault`, a grader error.
+    ``cache``: where answers to plain-data calls are kept between submissions (see :class:`ReferenceCache`).
     """
 
-    def __init__(self, namespace: dict[str, Any], helpers: str | None = None) -> None:
+    def __init__(self, namespace: dict[str, Any], helpers: str | None = None,
+                 cache: ReferenceCache | None = None) -> None:
         super().__init__()
         self.worker = Worker(lent_call=self.call_lent)
         self.worker.namespace = namespace
+        self.cache = cache
         if helpers is not None:
             self.worker.run({"op": "exec", "label": "suite helpers", "source": helpers, "module": HELPERS}, [])
 
     def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float | None = None) -> Any:
-        try:
-            value = self.worker.run(header, blobs)
-            tree, out = encode(value, self.worker.to_handle)
-        except Exception as err:  # noqa: BLE001 - whatever the reference raised, it is not the student's fault
-            raise ReferenceFault(f"the reference failed on a hidden test's input ({type(err).__name__}: {err})") from err
-        return _decode_reply(self, {"ok": True, "value": tree}, out)
+        key = self.cache.key(header, blobs) if self.cache is not None else None
+        answer = self.cache.get(key) if key is not None else None
+        if answer is None:
+            try:
+                value = self.worker.run(header, blobs)
+                answer = encode(value, self.worker.to_handle)
+            except Exception as err:  # noqa: BLE001 - whatever the reference raised, it is not the student's fault
+                raise ReferenceFault(f"the reference failed on a hidden test's input ({type(err).__name__}: {err})") from err
+            if key is not None:
+                self.cache.put(key, *answer)
+        return _decode_reply(self, {"ok": True, "value": answer[0]}, answer[1])
 
 
 ReferenceCall = Callable[[str, Any, list[bytes]], tuple[dict, list[bytes]]]
