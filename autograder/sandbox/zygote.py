@@ -36,7 +36,8 @@ with the identity of their owner, but a program it starts reads with the worker'
 the file-system identity), which a checkout of mode 700 shuts out: such probes must run here, before."""
 
 
-def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, existing: int) -> None:
+def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, existing: int,
+                 launcher: int | None = None) -> None:
     """[worker] Isolate, then serve; never returns. Any failure before serving is reported, then the worker dies."""
     to_worker, from_worker, output = fds
     try:
@@ -64,6 +65,7 @@ def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, exis
         isolation.set_limits(config.limits, config.limits.processes + (0 if own_uid is not None else existing))
         if level != "none":
             isolation.drop_privileges(own_uid, config.view.read_as)
+        _die_with_parent(launcher)
     except BaseException as err:  # noqa: BLE001 - report any set-up failure, then die
         try:
             send_message(from_worker, {"ok": False, "kind": "SandboxError", "error": f"sandbox set-up failed: {err}"})
@@ -74,11 +76,24 @@ def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, exis
     os._exit(0)
 
 
-def _launch(config: SpawnConfig, fds: list[int]) -> None:
+def _die_with_parent(parent: int | None) -> None:
+    """Be killed when the process that forked this one ends (set after any change of identity, which clears it).
+
+    The chain grader -> zygote -> launcher -> worker then ends with the grader: a batch killed mid-way
+    leaves no worker looping until its CPU limit. ``parent``: its pid, to catch a parent already gone
+    (None where it cannot be seen: a worker's parent is outside its pid namespace).
+    """
+    isolation.libc.prctl(isolation.PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if parent is not None and os.getppid() != parent:
+        os._exit(0)
+
+
+def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> None:
     """[launcher] Enter namespaces, fork the worker, report its pid, wait for it; never returns."""
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     os.setsid()
     level = isolation.enter_namespaces()
+    _die_with_parent(zygote)
     uid = WORKER_UID_BASE + os.getpid() % WORKER_UID_SPAN
     existing = isolation.processes_of(os.getuid())  # counted before the worker's /proc shows only its own namespace
     sync_r, sync_w = os.pipe()
@@ -87,7 +102,8 @@ def _launch(config: SpawnConfig, fds: list[int]) -> None:
         os.close(sync_w)
         os.read(sync_r, 1)
         os.close(sync_r)
-        _boot_worker(config, fds, level, uid, existing)
+        # In a new pid namespace the launcher is outside it (getppid() is 0): the worker cannot check it.
+        _boot_worker(config, fds, level, uid, existing, os.getppid() or None)
     os.close(sync_r)
     send_message(fds[1], {"ok": True, "pid": pid, "pgid": os.getpgid(0), "isolation": level})
     os.write(sync_w, b"go")
@@ -121,9 +137,10 @@ def main(sock: socket.socket, preload: list[str]) -> None:
         if not message:
             os._exit(0)
         config = SpawnConfig.from_json(json.loads(message))
+        zygote = os.getpid()
         if os.fork() == 0:
             sock.close()
-            _launch(config, list(fds))
+            _launch(config, list(fds), zygote)
         for fd in fds:
             os.close(fd)
 

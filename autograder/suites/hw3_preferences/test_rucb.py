@@ -106,3 +106,33 @@ def test_does_not_lock_onto_early_luck(student):
     shares = [np.mean(_run(student, P, 2000, seed)[-500:] == best) for seed in range(10)]
     assert np.mean(shares) > 0.6, (f"the best arm ({best}) is only {np.mean(shares):.0%} of the arms played in the last 500 "
                                    f"duels on average over 10 runs (per run: {np.round(shares, 2).tolist()})")
+
+
+class _StrictOrder:
+    """A bandit without noise: of two arms, the one ranked higher always wins (ranks are a hidden permutation)."""
+
+    def __init__(self, rank: np.ndarray) -> None:
+        self.rank, self.n_arms = rank, len(rank)
+
+    def duel(self, c: int, d: int) -> float:
+        return 1.0 if self.rank[c] <= self.rank[d] else 0.0
+
+
+@stub("rucb", points=1, hint="The bonus is sqrt(alpha ln t / N): it grows with t, so an arm that has lost stays a "
+                             "candidate until it has lost about 4 alpha ln t times, and RUCB keeps exploring.")
+def test_explores_at_the_rate_of_its_bonus(student, rng):
+    """Noiseless duels among 6 arms, 2,000 steps: every loser is tried until its bonus, sqrt(alpha ln t / N), runs out"""
+    rank = rng.permutation(6)
+    best = int(np.argmin(rank))
+    counts = []
+    for seed in range(3):
+        env = _StrictOrder(rank)
+        pairs = student.eval(RUN, env=lend(env, methods=["duel"], attrs=["n_arms"]), horizon=2000, seed=seed,
+                             timeout=60)
+        counts.append(int((np.asarray(pairs) != best).any(axis=1).sum()))
+    # A loser j stays a candidate while its bonus against the winner is >= 1/2, N_j <= 4 alpha ln t: about 15 losses
+    # each by t = 2,000, so the reference plays 107 to 170 duels that involve a loser; a bonus that shrinks with t
+    # (alpha / ln t, say) or no bonus at all plays about 10.
+    assert min(counts) >= 40, (f"with noiseless duels, only {counts} of 2,000 duels (3 runs) involved an arm other than "
+                               "the best: RUCB should keep each loser as a candidate while sqrt(alpha ln t / N) >= 1/2, "
+                               "about 4 alpha ln t ≈ 15 losses each; is the bonus growing with ln t?")
