@@ -13,7 +13,8 @@
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
   mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/mutants.py)
-  nbgrader-sync, feedback, export, regrade, results-diff   the term after batch (autograder/outputs/cli.py)
+  nbgrader-sync, feedback, export, regrade, results-diff, class-report   the term after batch
+                                     (autograder/outputs/cli.py)
 """
 from __future__ import annotations
 
