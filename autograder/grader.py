@@ -195,7 +195,8 @@ class Grader:
             raise
         self.dependencies = stub_dependencies(assignment, self.expected)
         self.version = course.suite_version(assignment)
-        self.reference_cache = ReferenceCache()
+        # A benchmark sets the size to 0 to measure what hidden inputs varied per submission would cost.
+        self.reference_cache = ReferenceCache(int(os.environ.get("AUTOGRADER_REFERENCE_CACHE_BYTES", 256 * 2**20)))
 
     def _reference_call(self, name: str, tree: Any, blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
         """Run reference ``name`` for a stand-in in the sandbox; plain data in and out, never handles."""
@@ -256,8 +257,8 @@ class Grader:
             if broken_setup:
                 self._blame_setup(session, broken_setup[0])
             result.isolation = session.isolation
-            plugin = SuitePlugin(Namespace(session, "student"),
-                                 Namespace(LocalTransport(self.reference_ns, self.helpers, self.reference_cache), "reference"), session.status,
+            reference = LocalTransport(self.reference_ns, self.helpers, self.reference_cache)
+            plugin = SuitePlugin(Namespace(session, "student"), Namespace(reference, "reference"), session.status,
                                  session, self.dependencies)
             self._run_suite(plugin)
             if plugin.grader_faults:
