@@ -136,3 +136,35 @@ def test_explores_at_the_rate_of_its_bonus(student, rng):
     assert min(counts) >= 40, (f"with noiseless duels, only {counts} of 2,000 duels (3 runs) involved an arm other than "
                                "the best: RUCB should keep each loser as a candidate while sqrt(alpha ln t / N) >= 1/2, "
                                "about 4 alpha ln t ≈ 15 losses each; is the bonus growing with ln t?")
+
+
+class _LeaderFalls:
+    """Arm 1 wins every duel for the first ``switch`` steps, then loses every one; other duels are coin flips."""
+
+    def __init__(self, n_arms: int, switch: int, seed: int) -> None:
+        self.n_arms, self.switch, self.t, self.rng = n_arms, switch, 0, np.random.default_rng(seed)
+
+    def duel(self, c: int, d: int) -> float:
+        self.t += 1
+        if c == d:
+            return 1.0
+        if 1 in (c, d):
+            return float((c == 1) == (self.t <= self.switch))
+        return float(self.rng.random() < 0.5)
+
+
+@stub("rucb", points=1, hint="Keep the remembered candidate only while it is still in the candidate set (B = B ∩ C "
+                             "every step): once it leaves C, forget it.")
+def test_forgets_a_candidate_that_left_the_set(student):
+    """An early leader that then loses every duel stops being played as the candidate c (the remembered arm is
+    forgotten once it leaves the candidate set)"""
+    shares = []
+    for seed in range(2):
+        env = _LeaderFalls(4, 300, 100 + seed)
+        pairs = student.eval(RUN, env=lend(env, methods=["duel"], attrs=["n_arms"]), horizon=3000, seed=seed,
+                             timeout=60)
+        shares.append(float(np.mean(np.asarray(pairs)[-1000:, 0] == 1)))
+    # Arm 1 is the sole candidate early (so it is remembered), then loses everything: the reference plays it as c
+    # in 0.1% of the last 1,000 duels; keeping it remembered after it left C plays it half the time.
+    assert max(shares) < 0.1, (f"arm 1 lost every duel after step 300, yet it was the candidate c in {shares} of the "
+                               "last 1,000 duels of each run: is the remembered candidate kept after it left C?")
