@@ -1,6 +1,7 @@
 """Throughput of grading a whole class: every assignment, a realistic mix, ``batch --jobs 2``.
 
     python bench/bench_class_throughput.py [--n 20] [--jobs 2] [--ids hw0_setup ...] [--record]
+    python bench/bench_class_throughput.py --overhead   # one warm grading of an untouched hw0 notebook
 
 For each assignment, a class of N copies of its sample submissions in the issue's mix (per 20: 10
 complete, 6 partial, 2 untouched, 1 raising an exception, 1 looping forever) is graded by
@@ -56,12 +57,30 @@ def timed_batch(assignment: str, folder: Path, out: Path, jobs: int) -> tuple[fl
     return wall, (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
 
 
+def overhead(assignment: str = "hw0_setup", sample: str = "untouched", repeats: int = 3) -> float:
+    """Median seconds to grade one sample with one warm Grader: what every submission pays besides its tests."""
+    from autograder.grader import Grader
+
+    grader = Grader(assignment)
+    path = REPO / "autograder" / "samples" / assignment / f"{sample}.ipynb"
+    grader.grade(path)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        grader.grade(path)
+        times.append(time.perf_counter() - start)
+    grader.close()
+    return sorted(times)[repeats // 2]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, default=20)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--ids", nargs="*", default=None)
     parser.add_argument("--record", action="store_true")
+    parser.add_argument("--overhead", action="store_true",
+                        help="only time grading hw0's untouched sample with a warm grader (median of 3)")
     parser.add_argument("--no-reference-cache", action="store_true",
                         help="recompute the reference's answers for every submission (as if hidden inputs varied)")
     args = parser.parse_args()
@@ -69,6 +88,10 @@ def main() -> None:
 
     if args.no_reference_cache:
         os.environ["AUTOGRADER_REFERENCE_CACHE_BYTES"] = "0"
+    if args.overhead:
+        print(f"grading hw0's untouched sample, warm grader: {overhead():.2f} s (median of 3, load "
+              f"{os.getloadavg()[0]:.1f})")
+        return
 
     ids = args.ids or [i for i in course.assignment_ids() if course.suite_dir(i).is_dir()]
     rows = []
