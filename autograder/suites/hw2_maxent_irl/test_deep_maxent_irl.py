@@ -104,3 +104,23 @@ def test_learns_as_well_as_reference(student, reference):
         f"the soft policy of the learned reward earns less than the reference's by more than the allowed 0.15 x horizon "
         f"(a shortfall of the order of {10.0 ** np.floor(np.log10(short)):g} in true return)")
     assert np.asarray(hist["grad_norm"])[-10:].mean() < np.asarray(hist["grad_norm"])[0], "the visitation gap should shrink"
+
+
+@stub("deep_maxent_irl", points=1, hint="The gradient with respect to r(s) is exactly D_expert(s) - D_model(s): back-propagate "
+                                        "-(grad_r * reward).sum(), not a mean over states, which divides it by S while "
+                                        "Adam's weight decay stays as it is.")
+def test_gradient_scale_against_weight_decay(student, reference):
+    """With strong weight decay (0.1) the reward keeps its structure: the log-likelihood gradient is not divided by S"""
+    world, demos = _world()
+    args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+    got, _ = student.deep_maxent_irl(*args, n_iters=40, weight_decay=0.1)
+    got = np.asarray(got, dtype=float)
+    want, _ = reference.deep_maxent_irl(*args, n_iters=40, weight_decay=0.1)
+    spread = float(np.std(got) / np.std(want))
+    # Adam rescales the gradient, but its weight decay (an L2 term) is added before: a loss averaged over the S states
+    # leaves the decay S times stronger, and the reward collapses to a constant (spread 0.0 against the reference's).
+    assert 0.5 < spread < 2, (f"with weight_decay=0.1 the learned reward's spread across states is {spread:.2f} times "
+                              "the reference's: is the surrogate loss a mean over states instead of the sum that "
+                              "gives d loss / d r(s) = -(D_expert(s) - D_model(s))?")
+    assert np.corrcoef(got, want)[0, 1] > 0.9, ("with weight_decay=0.1 the learned reward should stay close to the "
+                                                "reference's after 40 iterations from the same initial network")
