@@ -136,6 +136,8 @@ def test_explores_at_the_rate_of_its_bonus(student, rng):
     assert min(counts) >= 40, (f"with noiseless duels, only {counts} of 2,000 duels (3 runs) involved an arm other than "
                                "the best: RUCB should keep each loser as a candidate while sqrt(alpha ln t / N) >= 1/2, "
                                "about 4 alpha ln t ≈ 15 losses each; is the bonus growing with ln t?")
+    assert max(counts) <= 600, (f"with noiseless duels, {counts} of 2,000 duels (3 runs) involved an arm other than the "
+                                "best: once every loser's bonus has run out RUCB should duel the winner against itself")
 
 
 class _LeaderFalls:
@@ -158,12 +160,16 @@ class _LeaderFalls:
 def test_forgets_a_candidate_that_left_the_set(student):
     """An early leader that then loses every duel stops being played as the candidate c (the remembered arm is
     forgotten once it leaves the candidate set)"""
-    shares = []
+    shares, leading = [], []
     for seed in range(2):
         env = _LeaderFalls(4, 300, 100 + seed)
         pairs = student.eval(RUN, env=lend(env, methods=["duel"], attrs=["n_arms"]), horizon=3000, seed=seed,
                              timeout=60)
         shares.append(float(np.mean(np.asarray(pairs)[-1000:, 0] == 1)))
+        leading.append(float(np.mean(np.asarray(pairs)[100:300, 0] == 1)))
+    assert min(leading) > 0.5, (f"arm 1 won every duel of the first 300 steps, yet it was the candidate c in only "
+                                f"{leading} of steps 100 to 300: the sole candidate should be played (the reference: "
+                                "over 97%)")
     # Arm 1 is the sole candidate early (so it is remembered), then loses everything: the reference plays it as c
     # in 0.1% of the last 1,000 duels; keeping it remembered after it left C plays it half the time.
     assert max(shares) < 0.1, (f"arm 1 lost every duel after step 300, yet it was the candidate c in {shares} of the "
