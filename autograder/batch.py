@@ -277,4 +277,3 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
     write_gradebook(results, out_dir / shard.gradebook_name, expected)
     return results
-
