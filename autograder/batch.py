@@ -130,6 +130,27 @@ def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected:
     return Entry(name, chosen, note=note + (f"; {skipped_note}" if skipped_note else ""))
 
 
+def grade_upload(assignment: str, folder: Path, hide: list[Path] = ()) -> GradeResult:
+    """Grade the one submission uploaded into ``folder``, as a hosted grader (Gradescope, PrairieLearn) lays it out.
+
+    The notebook is chosen as :func:`choose_notebook` chooses; links in the upload are named, never followed.
+    Raises :class:`GraderError` when the grader cannot be built; a fault while grading comes back as a result
+    of status ``grader_error``.
+    """
+    notebooks, skipped = notebooks_in(folder)
+    entry = choose_notebook("submission", notebooks, assignment, course.stub_names(assignment), skipped)
+    grader = Grader(assignment, hide=hide)
+    try:
+        if entry.notebook is None:
+            return grader.ungradable("submission", entry.problem)
+        result = grader.grade(entry.notebook, name=entry.notebook.name)
+    finally:
+        grader.close()
+    if entry.note:
+        result.notes.insert(0, entry.note)
+    return result
+
+
 def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
     """One entry per submission in ``folder`` (see the module docstring for the layouts).
 

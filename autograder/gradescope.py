@@ -83,30 +83,18 @@ def run(assignment: str, root: Path) -> int:
     Gradescope then shows "The autograder failed to execute correctly" (and the student may
     resubmit), never a score of 0 for a fault that is not theirs.
     """
-    from autograder.batch import choose_notebook, notebooks_in
-    from autograder.grader import Grader
+    from autograder.batch import grade_upload
     from autograder.report import gradescope_results
     from autograder.results import GraderError
 
     results = root / "results" / "results.json"
     results.parent.mkdir(parents=True, exist_ok=True)
     results.unlink(missing_ok=True)
-    notebooks, skipped = notebooks_in(root / "submission")  # links in the upload are named, never followed
-    entry = choose_notebook("submission", notebooks, assignment, course.stub_names(assignment), skipped)
     try:
-        grader = Grader(assignment)
+        result = grade_upload(assignment, root / "submission")
     except GraderError as err:
         print(f"the autograder failed (not the submission's fault): {err}", file=sys.stderr)
         return 1
-    try:
-        if entry.notebook is None:
-            result = grader.ungradable("submission", entry.problem)
-        else:
-            result = grader.grade(entry.notebook, name=entry.notebook.name)
-            if entry.note:
-                result.notes.insert(0, entry.note)
-    finally:
-        grader.close()
     if not result.has_score:
         print(f"the autograder failed (not the submission's fault): {result.error}", file=sys.stderr)
         return 1

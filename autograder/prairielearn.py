@@ -102,26 +102,13 @@ def write_results(results: dict[str, Any], root: Path) -> Path:
 
 def run(assignment: str, root: Path) -> int:
     """Grade the submission under ``root/student``; always leaves a ``results.json`` (exit 0 when graded)."""
-    from autograder.batch import choose_notebook, notebooks_in
-    from autograder.grader import Grader
-    from autograder.results import GraderError
+    from autograder.batch import grade_upload
 
     root = Path(root)
     try:
         course.check_assignment(assignment)
-        notebooks, skipped = notebooks_in(root / "student")  # links in the upload are named, never followed
-        entry = choose_notebook("submission", notebooks, assignment, course.stub_names(assignment), skipped)
-        grader = Grader(assignment, hide=[root / "student", root / "results"])
-        try:
-            if entry.notebook is None:
-                result = grader.ungradable("submission", entry.problem)
-            else:
-                result = grader.grade(entry.notebook, name=entry.notebook.name)
-                if entry.note:
-                    result.notes.insert(0, entry.note)
-        finally:
-            grader.close()
-    except (GraderError, SystemExit, Exception) as err:  # noqa: BLE001 - any fault here is the grader's
+        result = grade_upload(assignment, root / "student", hide=[root / "student", root / "results"])
+    except (SystemExit, Exception) as err:  # noqa: BLE001 - any fault here (a GraderError, say) is the grader's
         print(f"the autograder failed (not the submission's fault): {err}", file=sys.stderr)
         write_results(prairielearn_results(GradeResult(assignment, "submission", [], [], [], str(err),
                                                        status=GRADER_ERROR)), root)

@@ -99,7 +99,7 @@ def test_when_the_grader_cannot_start_the_results_say_so(tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise GraderError("the reference solution could not be built")
 
-    monkeypatch.setattr("autograder.grader.Grader", broken)
+    monkeypatch.setattr("autograder.batch.Grader", broken)
     (tmp_path / "student").mkdir()
     shutil.copy(SAMPLES / "complete.ipynb", tmp_path / "student" / "hw0_setup.ipynb")
     assert prairielearn.run("hw0_setup", tmp_path) == 1
