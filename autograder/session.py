@@ -316,11 +316,12 @@ class Session(Transport):
         """A fresh worker; raises :class:`GraderError` if it cannot start (no student code has run in it)."""
         self.close()
         self.generation += 1
-        self.worker = self.zygote.spawn(self.config)
         try:
+            self.worker = self.zygote.spawn(self.config)
             self.worker.start(timeout=START_SECONDS)
-        except (ChannelTimeout, ChannelClosed, ProtocolError, SandboxStartError) as err:
-            self.worker.kill()
+        except (ChannelTimeout, ChannelClosed, ProtocolError, SandboxStartError, OSError) as err:
+            if self.worker is not None:
+                self.worker.kill()
             raise GraderError(f"the sandbox could not start: {err}") from None
         self.isolation = self.worker.isolation
 

@@ -22,7 +22,7 @@ import time
 from dataclasses import asdict
 from typing import Any
 
-from autograder.sandbox.config import SpawnConfig
+from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig
 from autograder.sandbox.isolation import PR_SET_DUMPABLE, libc
 from autograder.sandbox.wire import MAX_MESSAGE_BYTES, FrameReader, send_message
 
@@ -30,6 +30,10 @@ OUTPUT_KEEP = 4096
 """Bytes of a worker's stdout/stderr kept (the newest): enough context for a crash message."""
 TAIL_CHARS = 1500
 """Characters of that output a crash message may quote."""
+PRELOAD_SECONDS = 600.0
+"""How long the zygote may take to import the course's modules (torch, mujoco...) before its first worker.
+Apart from a worker's own start deadline: on a loaded machine with a cold disk the imports alone can
+take longer than a worker may take to start, and a slow machine is the grader's fault, not a student's."""
 
 
 class Zygote:
@@ -43,19 +47,43 @@ class Zygote:
         child.close()
         self.sock = parent
         self.lock = threading.Lock()
+        self.ready = False
         libc.prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)  # workers may not read the grader's memory
 
     def spawn(self, config: SpawnConfig) -> "WorkerProcess":
         """A new worker isolated as ``config`` says; what it sends back is capped at its ``message_bytes``."""
-        to_r, to_w = os.pipe()
-        from_r, from_w = os.pipe()
-        out_r, out_w = os.pipe()
         message = json.dumps(asdict(config)).encode()
         with self.lock:
-            socket.send_fds(self.sock, [message], [to_r, from_w, out_w])
-        for fd in (to_r, from_w, out_w):
-            os.close(fd)
+            self._wait_ready()
+            to_r, to_w = os.pipe()
+            from_r, from_w = os.pipe()
+            out_r, out_w = os.pipe()
+            try:
+                socket.send_fds(self.sock, [message], [to_r, from_w, out_w])
+            except OSError:
+                for fd in (to_w, from_r, out_r):
+                    os.close(fd)
+                raise
+            finally:
+                for fd in (to_r, from_w, out_w):
+                    os.close(fd)
         return WorkerProcess(to_w, from_r, out_r, config.limits.message_bytes)
+
+    def _wait_ready(self) -> None:
+        """Wait, once, for the zygote's word that its imports are done; raises :class:`SandboxStartError`."""
+        if self.ready:
+            return
+        self.sock.settimeout(PRELOAD_SECONDS)
+        try:
+            word = self.sock.recv(len(ZYGOTE_READY))
+        except TimeoutError:
+            raise SandboxStartError(f"the sandbox's host process did not finish importing the course's modules "
+                                    f"in {PRELOAD_SECONDS:.0f} s") from None
+        finally:
+            self.sock.settimeout(None)
+        if word != ZYGOTE_READY:
+            raise SandboxStartError("the sandbox's host process ended while importing the course's modules")
+        self.ready = True
 
     def close(self) -> None:
         self.sock.close()

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+ZYGOTE_READY = b"R"
+"""What the zygote writes on its socket once its imports are done, before it serves any request."""
+
 
 @dataclass
 class Limits:
