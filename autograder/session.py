@@ -24,9 +24,37 @@ from autograder.supervisor import SandboxStartError, WorkerProcess, Zygote
 
 START_SECONDS = 30.0
 """A worker that has not reported ready by then is broken (the grader's fault: no student code ran yet)."""
+CPU_WAIT_STRETCH = 3.0
+"""How far a time limit may stretch, as a multiple of itself, by the time the worker spent waiting for a busy
+CPU. A loaded machine (a batch, other users) then does not turn an honest submission's call into a timeout,
+while a submission that loads the machine itself (busy threads of its own) gains at most this much."""
 KIND_CHARS, ERROR_CHARS, TAIL_QUOTED = 80, 3000, 300
 """Cuts of what the worker reports: an exception's type name, its message, and the output quoted after a crash."""
 NOT_IMPLEMENTED = "NotImplementedError"
+
+
+class FairDeadline:
+    """A deadline ``seconds`` from now, not counting the worker's wait for a CPU (at most ``max_credit`` of it).
+
+    Time spent computing or sleeping counts; time spent runnable while other processes held every CPU does
+    not. Where the kernel does not report the wait, it is a plain wall-clock deadline.
+    """
+
+    def __init__(self, seconds: float, worker: WorkerProcess, max_credit: float) -> None:
+        self.start, self.seconds, self.worker, self.max_credit = time.monotonic(), seconds, worker, max_credit
+        self.wait_at_start = worker.cpu_wait()
+        self._credit = 0.0
+
+    def credit(self) -> float:
+        """Seconds of CPU wait forgiven so far."""
+        if self.wait_at_start is not None:
+            now = self.worker.cpu_wait()
+            if now is not None:
+                self._credit = min(max(self._credit, now - self.wait_at_start), self.max_credit)
+        return self._credit
+
+    def left(self) -> float:
+        return self.start + self.seconds + self.credit() - time.monotonic()
 
 
 class StudentError(Exception):
@@ -301,6 +329,8 @@ class Session(Transport):
         self.restarts = 0
         self.standing_in: frozenset[str] = frozenset()
         self.test_deadline: float | None = None
+        self.test_credit = 0.0      # CPU wait forgiven in this test's calls so far
+        self.credit_used = 0.0      # and in the whole submission's
 
     # -------------------------------------------------------------- lifecycle
 
@@ -365,29 +395,36 @@ class Session(Transport):
     def begin_test(self) -> None:
         """A hidden test starts: from now its calls share one deadline, ``test_seconds`` away."""
         self.test_deadline = time.monotonic() + self.limits.test_seconds
+        self.test_credit = 0.0
 
     def end_test(self) -> None:
         self.test_deadline = None
 
-    def _deadline(self, timeout: float, explicit: bool) -> tuple[float, str]:
+    def _deadline(self, timeout: float, explicit: bool) -> tuple[FairDeadline, str]:
         """When a request must be answered, and what the student is told if it is not.
 
         The earliest of: the call's own limit, the test's deadline (unless the suite gave this call a
-        ``timeout`` of its own), and what is left of the submission's total time.
+        ``timeout`` of its own), and what is left of the submission's total time. None of them counts the
+        worker's wait for a busy CPU, up to ``CPU_WAIT_STRETCH`` times each limit.
         """
         now = time.monotonic()
-        left = self.limits.submission_seconds - self.time_used
+        total = self.limits.submission_seconds
+        left = total - self.time_used
         if left <= 0:
-            raise SandboxTimeout(f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s")
-        bounds = [(now + timeout, f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)"),
-                  (now + left, f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s")]
+            raise SandboxTimeout(f"stopped: the submission used up its total time of {total:.0f} s")
+        stretch = CPU_WAIT_STRETCH - 1
+        bounds = [(timeout, stretch * timeout, f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)"),
+                  (left, stretch * total - self.credit_used,
+                   f"stopped: the submission used up its total time of {total:.0f} s")]
         if self.test_deadline is not None and not explicit:
-            bounds.append((self.test_deadline, f"ran past this test's time limit of {self.limits.test_seconds:.0f} s "
-                                               "(an infinite loop, or far too slow)"))
-        deadline, why = min(bounds)
-        if deadline <= now:
+            test_room = stretch * self.limits.test_seconds - self.test_credit
+            bounds.append((self.test_deadline + min(self.test_credit, stretch * self.limits.test_seconds) - now,
+                           max(0.0, test_room), f"ran past this test's time limit of {self.limits.test_seconds:.0f} s "
+                                                "(an infinite loop, or far too slow)"))
+        seconds, room, why = min(bounds, key=lambda bound: bound[0])
+        if seconds <= 0:
             raise SandboxTimeout(why)
-        return deadline, why
+        return FairDeadline(seconds, self.worker, max(0.0, min(room, stretch * seconds))), why
 
     def _raw(self, header: dict[str, Any], blobs: list[bytes], timeout: float, explicit: bool = False) -> Any:
         """Send one request and read its answer, serving the worker's callbacks meanwhile, all by one deadline.
@@ -404,7 +441,7 @@ class Session(Transport):
             while "callback" in reply:  # the student's code called back into the grader: answer, read on
                 answer, answer_blobs = self._answer(reply, reply_blobs)
                 del reply_blobs
-                if time.monotonic() >= deadline:
+                if deadline.left() <= 0:
                     raise ChannelTimeout(why)
                 self.worker.send(answer, answer_blobs, deadline)
                 reply, reply_blobs = self.worker.receive(deadline)
@@ -422,7 +459,10 @@ class Session(Transport):
             self.worker.kill()
             raise SandboxFailure(f"sent malformed data back to the grader ({err})") from None
         finally:
-            self.time_used += time.monotonic() - start
+            credit = deadline.credit()
+            self.time_used += max(0.0, time.monotonic() - start - credit)
+            self.credit_used += credit
+            self.test_credit += credit
 
     def _answer(self, reply: dict[str, Any], blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
         """Answer a callback: a reference stand-in (only for the stubs standing in now) or a lent object's method."""

@@ -129,11 +129,22 @@ class WorkerProcess:
             raise SandboxStartError(ready.get("error", "the sandbox failed to start"))
         return header
 
-    def send(self, header: dict[str, Any], blobs: list[bytes], deadline: float) -> None:
+    def cpu_wait(self) -> float | None:
+        """Seconds the worker has spent runnable but waiting for a CPU (the kernel's run delay of its main
+        thread, in ``/proc/PID/schedstat``); None where the kernel does not say."""
+        if not isinstance(self.pid, int) or not self.alive:
+            return None
+        try:
+            with open(f"/proc/{self.pid}/schedstat") as f:
+                return int(f.read().split()[1]) / 1e9
+        except (OSError, ValueError, IndexError):
+            return None
+
+    def send(self, header: dict[str, Any], blobs: list[bytes], deadline: Any) -> None:
         """Write a message; raises ``ChannelTimeout`` if the worker has not taken it all by ``deadline``."""
         send_message(self.to_fd, header, blobs, deadline)
 
-    def receive(self, deadline: float) -> tuple[dict[str, Any], list[bytearray]]:
+    def receive(self, deadline: Any) -> tuple[dict[str, Any], list[bytearray]]:
         """Read a message, whole and within the size cap, by ``deadline``."""
         return self.reader.read_message(deadline=deadline)
 

@@ -217,7 +217,17 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
 # ---------------------------------------------------------------- framing
 
 
-def _wait(fd: int, event: int, deadline: float | None) -> None:
+def seconds_left(deadline: Any) -> float | None:
+    """What is left before ``deadline``: None (no limit), a ``time.monotonic()`` value, or an object whose
+    ``left()`` says (the grader's deadlines that do not count a worker's wait for a busy CPU)."""
+    if deadline is None:
+        return None
+    if isinstance(deadline, (int, float)):
+        return deadline - time.monotonic()
+    return deadline.left()
+
+
+def _wait(fd: int, event: int, deadline: Any) -> None:
     """Block until ``fd`` is ready for ``event`` (``select.POLLIN`` or ``POLLOUT``), or raise at ``deadline``."""
     poller = select.poll()
     poller.register(fd, event)
@@ -225,7 +235,7 @@ def _wait(fd: int, event: int, deadline: float | None) -> None:
         if deadline is None:
             timeout_ms = None
         else:
-            remaining = deadline - time.monotonic()
+            remaining = seconds_left(deadline)
             if remaining <= 0:
                 raise ChannelTimeout("no answer in time" if event == select.POLLIN else "the other side stopped reading")
             timeout_ms = max(1, int(remaining * 1000))
@@ -243,7 +253,7 @@ def _write_all(fd: int, data: bytes, deadline: float | None) -> None:
             _wait(fd, select.POLLOUT, deadline)
             continue
         view = view[n:]
-        if view and deadline is not None and time.monotonic() > deadline:
+        if view and deadline is not None and seconds_left(deadline) < 0:
             raise ChannelTimeout("the other side stopped reading")
 
 
