@@ -28,6 +28,12 @@ def _world():
     return _CACHE["world"]
 
 
+def _world_and_args():
+    """The world and deep_maxent_irl's positional arguments on it."""
+    world, demos = _world()
+    return world, (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+
+
 def _ratio(reference, world, reward):
     policy = reference.soft_value_iteration(world.P, np.asarray(reward, dtype=float), world.horizon)
     def expected_return(pi):  # exact: visitation frequencies weighted by the true reward
@@ -66,8 +72,7 @@ def test_shapes_and_history(student, reference):
                                         "over time of log pi_t(a_t | s_t); grad_norm the Euclidean norm of D_expert - D_model.")
 def test_history_values(student, reference):
     """The first entries of both histories are those of the initial network, and the log-likelihood rises"""
-    world, demos = _world()
-    args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+    world, args = _world_and_args()
     _, hist = student.deep_maxent_irl(*args, n_iters=30)
     _, want = reference.deep_maxent_irl(*args, n_iters=30)
     assert isinstance(hist, dict) and {"grad_norm", "log_likelihood"} <= set(hist), \
@@ -91,8 +96,7 @@ def test_history_values(student, reference):
 @stub("deep_maxent_irl", points=2, hint=HINT)
 def test_learns_as_well_as_reference(student, reference):
     """After 150 iterations the learned reward's soft policy earns about what the reference's does"""
-    world, demos = _world()
-    args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+    world, args = _world_and_args()
     got, hist = student.deep_maxent_irl(*args, n_iters=150)
     got = np.asarray(got, dtype=float) if isinstance(got, np.ndarray) else got
     assert isinstance(got, np.ndarray) and got.shape == (world.n_states,) and np.isfinite(got).all(), (
@@ -111,8 +115,7 @@ def test_learns_as_well_as_reference(student, reference):
                                         "Adam's weight decay stays as it is.")
 def test_gradient_scale_against_weight_decay(student, reference):
     """With strong weight decay (0.1) the reward keeps its structure: the log-likelihood gradient is not divided by S"""
-    world, demos = _world()
-    args = (world.P, world.features, world.p0, demos.states, world.horizon, demos.actions)
+    world, args = _world_and_args()
     got, _ = student.deep_maxent_irl(*args, n_iters=40, weight_decay=0.1)
     got = np.asarray(got, dtype=float)
     want, _ = reference.deep_maxent_irl(*args, n_iters=40, weight_decay=0.1)
