@@ -12,7 +12,7 @@
   assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
-  mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/mutants.py)
+  mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/authoring/mutants.py)
   nbgrader-sync, feedback, export, regrade, results-diff, class-report   the term after batch
                                      (autograder/outputs/cli.py)
 """
@@ -24,11 +24,13 @@ from pathlib import Path
 
 
 def _cmd_grade(args: argparse.Namespace) -> int:
-    from autograder import course
-    from autograder.batch import choose_notebook, notebooks_in
-    from autograder.grader import Grader
-    from autograder.report import plain, summary_lines, write_outputs
-    from autograder.results import GraderError
+    from autograder.core import course
+    from autograder.core.batch import choose_notebook, notebooks_in
+    from autograder.core.grader import Grader
+    from autograder.outputs.text import plain
+    from autograder.outputs.terminal import summary_lines
+    from autograder.outputs.files import write_outputs
+    from autograder.core.results import GraderError
 
     course.check_assignment(args.assignment)
     entry = None
@@ -68,7 +70,7 @@ GRADER_FAULT_EXIT = 3
 
 
 def _grader_failed(reason: str) -> int:
-    from autograder.report import plain
+    from autograder.outputs.text import plain
 
     print(f"NOT GRADED: the grader itself failed, so no score was written.\n  {plain(reason)}\n"
           "This is not the submission's fault. Check the course set-up (`make test` runs the grader's own "
@@ -83,18 +85,16 @@ def _warn_isolation(level: str) -> None:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from autograder.batch import GRADEBOOK_NAME, run_batch
-    from autograder.report import plain
-
-    from autograder.results import GRADED, GRADER_ERROR, UNGRADABLE
-
-    from autograder.batch import Shard
+    from autograder.core.batch import Shard
+    from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
+    from autograder.outputs.files import grade_folder
+    from autograder.outputs.text import plain
 
     try:
         shard = Shard.parse(args.shard) if args.shard else Shard()
     except ValueError as err:
         raise SystemExit(str(err)) from err
-    results = run_batch(args.assignment, args.folder, args.out, jobs=args.jobs, shard=shard)
+    results = grade_folder(args.assignment, args.folder, args.out, jobs=args.jobs, shard=shard)
     _warn_isolation("none" if any(r.isolation == "none" for r in results) else "full")
     count = {status: sum(r.status == status for r in results) for status in (GRADED, UNGRADABLE, GRADER_ERROR)}
     print(f"{len(results)} submissions ({count[GRADED]} graded, {count[UNGRADABLE]} ungradable, "
@@ -119,7 +119,7 @@ def _cmd_merge(args: argparse.Namespace) -> int:
 
 
 def _cmd_prairielearn(args: argparse.Namespace) -> int:
-    from autograder.prairielearn import question_files, run
+    from autograder.outputs.prairielearn import question_files, run
 
     if args.question_files is not None:
         for path in question_files(args.assignment, args.question_files, image=args.image):
@@ -129,7 +129,7 @@ def _cmd_prairielearn(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from autograder.nbrun import parse_value, run_notebook
+    from autograder.authoring.nbrun import parse_value, run_notebook
 
     parameters = dict(item.split("=", 1) for item in args.parameter)
     report = run_notebook(args.notebook, {k: parse_value(v) for k, v in parameters.items()}, timeout=args.timeout,
@@ -139,34 +139,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from autograder.demo import run_demo
+    from autograder.authoring.demo import run_demo
 
     return run_demo(args.out, jobs=args.jobs)
 
 
 def _cmd_gradescope(args: argparse.Namespace) -> int:
-    from autograder.gradescope import build_bundle
+    from autograder.outputs.gradescope import build_bundle
 
     print(f"wrote {build_bundle(args.assignment, args.out)}")
     return 0
 
 
 def _cmd_assignments(args: argparse.Namespace) -> int:
-    from autograder.release import generate_assignments
+    from autograder.authoring.release import generate_assignments
 
     generate_assignments(args.ids or None)
     return 0
 
 
 def _cmd_student_release(args: argparse.Namespace) -> int:
-    from autograder.release import build_student_release
+    from autograder.authoring.release import build_student_release
 
     print(f"student release written to {build_student_release(args.out)}")
     return 0
 
 
 def _cmd_samples(args: argparse.Namespace) -> int:
-    from autograder.samples import write_samples
+    from autograder.authoring.samples import write_samples
 
     for path in write_samples(args.assignment):
         print(path)
@@ -174,7 +174,7 @@ def _cmd_samples(args: argparse.Namespace) -> int:
 
 
 def _cmd_mutants(args: argparse.Namespace) -> int:
-    from autograder.mutants import command
+    from autograder.authoring.mutants import command
 
     return command(args.assignment, args.stub or None, args.max_per_stub, args.seed, args.out)
 

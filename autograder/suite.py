@@ -33,7 +33,7 @@ def lend(obj: Any, methods: Sequence[str], attrs: Sequence[str] = ()) -> Any:
     for an environment whose hidden parameters a stub must learn through its interface (a dueling
     bandit's preference matrix), so that no attribute or memory of the sandbox holds the answer.
     """
-    from autograder.session import Lend
+    from autograder.core.session import Lend
 
     return Lend(obj, tuple(methods), tuple(attrs))
 

@@ -30,8 +30,8 @@ MIX = ["complete"] * 4 + ["partial"] * 3 + ["untouched", "broken_syntax", "broke
 
 def overhead(repeats: int = 5) -> tuple[float, float]:
     """Median seconds: a full grade of the complete sample, and the suite run against the reference only."""
-    from autograder.grader import Grader, SuitePlugin
-    from autograder.session import LocalTransport, Namespace
+    from autograder.core.grader import Grader, SuitePlugin
+    from autograder.core.session import LocalTransport, Namespace
 
     grader = Grader("hw0_setup")
     full, reference_only = [], []

@@ -59,7 +59,7 @@ def timed_batch(assignment: str, folder: Path, out: Path, jobs: int) -> tuple[fl
 
 def overhead(assignment: str = "hw0_setup", sample: str = "untouched", repeats: int = 3) -> float:
     """Median seconds to grade one sample with one warm Grader: what every submission pays besides its tests."""
-    from autograder.grader import Grader
+    from autograder.core.grader import Grader
 
     grader = Grader(assignment)
     path = REPO / "autograder" / "samples" / assignment / f"{sample}.ipynb"
@@ -84,7 +84,7 @@ def main() -> None:
     parser.add_argument("--no-reference-cache", action="store_true",
                         help="recompute the reference's answers for every submission (as if hidden inputs varied)")
     args = parser.parse_args()
-    from autograder import course
+    from autograder.core import course
 
     if args.no_reference_cache:
         os.environ["AUTOGRADER_REFERENCE_CACHE_BYTES"] = "0"

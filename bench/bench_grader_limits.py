@@ -27,7 +27,7 @@ sys.path.insert(0, str(REPO / "tests"))
 
 GRADE_ONE = """
 import json, resource, sys, time
-from autograder.grader import Grader
+from autograder.core.grader import Grader
 start = time.monotonic()
 grader = Grader("fx")
 try:
@@ -46,7 +46,7 @@ MEMORY_RATIO = 2.0
 @contextlib.contextmanager
 def fixture_course():
     """The course tools pointed at the fixture course (they may be imported already, under pytest say)."""
-    from autograder import course
+    from autograder.core import course
     from conftest import FIXTURE_COURSE
 
     repo, course.REPO = course.REPO, FIXTURE_COURSE
@@ -58,8 +58,8 @@ def fixture_course():
 
 def wall_bound() -> float:
     """Seconds a submission of ``fx`` may take in all: its sandbox time, the reader's budget, worker starts."""
-    from autograder.intake import PARSE_WALL_SECONDS
-    from autograder.session import START_SECONDS
+    from autograder.core.intake import PARSE_WALL_SECONDS
+    from autograder.core.session import START_SECONDS
 
     with fixture_course() as course:
         return course.limits("fx").submission_seconds + PARSE_WALL_SECONDS + START_SECONDS
@@ -83,7 +83,7 @@ def grade_alone(notebook: Path, timeout: float) -> dict:
 def write_corpus(folder: Path) -> tuple[Path, dict[str, Path | None]]:
     """Every corpus submission in ``folder``/submissions, and the notebook batch grading would open for
     each (None where it opens nothing: a link, a pipe), found as ``batch`` finds them."""
-    from autograder.batch import discover
+    from autograder.core.batch import discover
     from conftest import FIXTURE_COURSE, with_cells
     from test_adversarial import CASES, _case_source, _hostile_files
 

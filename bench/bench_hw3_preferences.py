@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from scipy.stats import pearsonr, spearmanr
 
-from autograder.grader import build_reference
+from autograder.core.grader import build_reference
 from rlcourse.preferences import (DuelingBandit, dueling_regret, load_hopper_preferences, load_items,
                                   preference_accuracy, random_pairs, uniform_pairs)
 

@@ -88,7 +88,7 @@ def run(source: str, seed: int, n_pairs: int, dpo_steps: int | None) -> dict:
     """Train DPO on ``source`` in {"hw3", "own"} with minibatch seed ``seed``; evaluate it."""
     import torch
 
-    from autograder.grader import build_reference
+    from autograder.core.grader import build_reference
     from rlcourse.preferences import expected_bayes_accuracy
 
     torch.set_num_threads(1)

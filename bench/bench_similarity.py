@@ -3,7 +3,7 @@
     python bench/bench_similarity.py [--n 100] [--jobs 2] [--seed 0]
 
 The class is built from the student release: for each student and stub, the stub is left untouched
-(one time in five) or replaced by a mutant of the solution (``autograder.mutants.make_mutants``: the
+(one time in five) or replaced by a mutant of the solution (``autograder.authoring.mutants.make_mutants``: the
 solution with one operator changed), drawn at random. Every submission thus derives from one
 solution, the worst case for this pass: most pairs are flagged, and side-by-side pages are written
 for the most similar (``class_report.MAX_PAGES``). Times the two halves of ``class_report.find_similar`` (reading each notebook in its own
@@ -28,9 +28,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from autograder import course  # noqa: E402
-from autograder.mutants import make_mutants  # noqa: E402
-from autograder.notebook import read_notebook  # noqa: E402
+from autograder.core import course  # noqa: E402
+from autograder.authoring.mutants import make_mutants  # noqa: E402
+from autograder.core.notebook import read_notebook  # noqa: E402
 from autograder.outputs.class_report import compare_and_write  # noqa: E402
 from autograder.outputs.similarity import read_stub_code  # noqa: E402
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from autograder.batch import run_batch
+from autograder.outputs.files import grade_folder
 from conftest import FIXTURE_COURSE, REPO, with_cells
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
@@ -237,7 +237,7 @@ CASES = {
             except OSError:
                 pass
         sys.path[:0] = [os.path.join(COURSE_CODE, "tests"), os.path.join(COURSE_CODE, "datasets", "scripts")]
-        for module in ("lecture_math", "make_hw4_reward_model", "autograder.grader", "autograder.suites"):
+        for module in ("lecture_math", "make_hw4_reward_model", "autograder.core.grader", "autograder.suites"):
             try:
                 FOUND.append(str(importlib.import_module(module)))
             except BaseException:
@@ -515,11 +515,11 @@ def test_corpus_scores_nothing_as_root(corpus, monkeypatch):
     folder, out, hostile = corpus
     monkeypatch.setenv("RLCOURSE_TEST_SECRET", "do-not-leak")
     monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
-    from autograder import course
+    from autograder.core import course
 
     monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
     before = _code_digest()
-    results = run_batch("fx", folder, out, jobs=2, progress=False)
+    results = grade_folder("fx", folder, out, jobs=2, progress=False)
     assert len(results) == len(CASES) + len(hostile)
     _check_gradebook(out, hostile)
     assert _code_digest() == before, "course code on disk was modified"
@@ -605,7 +605,7 @@ def train_reward_model(obs, act, pairs, mu, **kwargs):
 def test_shipped_answers_and_a_lent_environments_hidden_state_score_nothing(open_tmp):
     """hw3's learners are judged on data no shipped model or file answers, and its rucb gets a dueling bandit
     that stays in the grader (no attribute or object in the sandbox holds P)."""
-    from autograder.grader import Grader
+    from autograder.core.grader import Grader
 
     notebook = with_cells(REPO / "autograder/samples/hw3_preferences/complete.ipynb", open_tmp / "cheat.ipynb",
                           {"rucb": PEEK_AT_THE_BANDIT, "train_reward_model": SHIPPED_ANSWERS})
@@ -623,7 +623,7 @@ def test_shipped_answers_and_a_lent_environments_hidden_state_score_nothing(open
 def test_classmates_and_results_inside_a_released_folder_are_hidden(open_tmp, monkeypatch):
     """An instructor who keeps submissions and results inside the course's released folders (nbgrader's
     ``submitted/`` under ``assignments/``, or notebooks beside the release notebook) exposes none of them."""
-    from autograder import course
+    from autograder.core import course
 
     course_copy = open_tmp / "course"
     shutil.copytree(FIXTURE_COURSE, course_copy)
@@ -651,7 +651,7 @@ def test_classmates_and_results_inside_a_released_folder_are_hidden(open_tmp, mo
     (out / "alice" / "result.json").write_text("{}")  # a stale result from an earlier run
     monkeypatch.setenv("RLCOURSE_REPO", str(course_copy))
     monkeypatch.setattr(course, "REPO", course_copy)
-    results = run_batch("fx", folder, out, jobs=1, progress=False)
+    results = grade_folder("fx", folder, out, jobs=1, progress=False)
     assert sorted(r.submission for r in results) == ["alice", "bob"]
     assert all(r.status == "graded" and r.score == 0 for r in results), [(r.submission, r.score) for r in results]
     # grade, given a notebook beside others in the release folder, hides its neighbours too

@@ -14,9 +14,9 @@ import nbformat
 import numpy as np
 import pytest
 
-from autograder import course
-from autograder.grader import Grader
-from autograder.samples import _with_stubs
+from autograder.core import course
+from autograder.core.grader import Grader
+from autograder.authoring.samples import _with_stubs
 
 pytestmark = pytest.mark.slow  # one grading per assignment: make test-fast leaves it out
 

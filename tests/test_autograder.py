@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from autograder.grader import Grader
-from autograder.report import feedback_markdown
+from autograder.core.grader import Grader
+from autograder.outputs.feedback import feedback_markdown
 from conftest import REPO, with_cells
 
 SOLVED = {
@@ -17,7 +17,7 @@ SOLVED = {
 
 @pytest.fixture(scope="module")
 def fx_grader():
-    from autograder import course
+    from autograder.core import course
 
     saved = course.REPO
     course.REPO = REPO / "tests" / "fixtures" / "course"
@@ -104,7 +104,7 @@ class _Bandit:
 
 
 def test_a_lent_object_stays_in_the_grader(fx_grader):
-    from autograder.session import Cell, Namespace, Session, StudentError
+    from autograder.core.session import Cell, Namespace, Session, StudentError
     from autograder.suite import lend
 
     session = Session(fx_grader.zygote, [Cell("setup", "import numpy as np")], fx_grader.config)
@@ -131,8 +131,12 @@ def test_student_text_cannot_forge_the_terminal_the_feedback_or_the_gradebook(tm
     """An exception message with terminal escapes, Markdown links and a formula is shown inert everywhere."""
     import csv
 
-    from autograder.report import feedback_markdown, summary_lines, write_gradebook
-    from autograder.results import GradeResult, StubResult, TestOutcome
+    from autograder.outputs.feedback import feedback_markdown
+
+    from autograder.outputs.terminal import summary_lines
+
+    from autograder.outputs.files import write_gradebook
+    from autograder.core.results import GradeResult, StubResult, TestOutcome
 
     forged = "\x1b[2J\rscaled_sum 3/3\n# All passed [claim](http://example.com) <img src=x>"
     result = GradeResult("fx", "=cmd|' /C calc'!A0", [StubResult("scaled_sum", [
@@ -146,3 +150,33 @@ def test_student_text_cannot_forge_the_terminal_the_feedback_or_the_gradebook(tm
     write_gradebook([GradeResult("fx", "x", [], [], error="=HYPERLINK(1)", status="ungradable")], tmp_path / "g.csv")
     row = next(csv.DictReader((tmp_path / "g.csv").open()))
     assert row["reason"].startswith("'=")
+
+
+def test_every_failure_records_its_reason_where_it_is_known(fx_grader, tmp_path):
+    """A failure's reason is a type set by the session and the suite runner, stored in the result record."""
+    from autograder.core.results import Reason, result_from_dict, result_to_dict
+
+    def reasons(result):
+        return {stub.name: {t.reason for t in stub.tests} for stub in result.stubs}
+
+    assert set().union(*reasons(fx_grader.grade(REPO / "tests/fixtures/course/solutions/fx/fx.ipynb")).values()) \
+        == {Reason.PASSED}
+    untouched = fx_grader.grade(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb")
+    assert set().union(*reasons(untouched).values()) == {Reason.NOT_IMPLEMENTED}
+    nb = with_cells(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb", tmp_path / "mixed.ipynb", {
+        "scaled_sum": None,
+        "mean_of": "def mean_of(values):\n    raise ValueError('not today')",
+        "Counter": "class Counter(:\n    pass",
+        "double_scaled": "def double_scaled(x):\n    return 0 * np.asarray(x, dtype=float).sum(axis=-1) + 1.5",
+    })
+    got = reasons(fx_grader.grade(nb))
+    assert got["scaled_sum"] == {Reason.MISSING}
+    assert got["mean_of"] == {Reason.EXCEPTION}
+    assert got["Counter"] == {Reason.SYNTAX}
+    assert got["double_scaled"] == {Reason.WRONG}
+    bad = tmp_path / "not_a_notebook.ipynb"
+    bad.write_text("this is not JSON")
+    lost = fx_grader.grade(bad)
+    assert lost.status == "ungradable" and set().union(*reasons(lost).values()) == {Reason.LOST}
+    again = result_from_dict(result_to_dict(fx_grader.grade(nb)))
+    assert reasons(again) == got, "the reason survives the record on disk"

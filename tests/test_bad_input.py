@@ -6,7 +6,7 @@ import json
 import nbformat
 import pytest
 
-from autograder.grader import Grader
+from autograder.core.grader import Grader
 from conftest import FIXTURE_COURSE, with_cells
 
 SOLUTION = FIXTURE_COURSE / "solutions/fx/fx.ipynb"
@@ -15,7 +15,7 @@ RELEASE = FIXTURE_COURSE / "assignments/fx/fx.ipynb"
 
 @pytest.fixture(scope="module")
 def grader():
-    from autograder import course
+    from autograder.core import course
 
     saved, course.REPO = course.REPO, FIXTURE_COURSE
     try:

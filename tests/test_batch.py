@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 
-from autograder.batch import discover
+from autograder.core.batch import discover
 from conftest import REPO
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it

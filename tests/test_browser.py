@@ -159,7 +159,7 @@ def lab(tmp_path_factory):
     if BROWSER is None:
         pytest.skip("no chromium on PATH: `apt-get install chromium` (make setup does it when run as root)")
     pytest.importorskip("websocket", reason="websocket-client is not installed")
-    from autograder.release import build_student_release
+    from autograder.authoring.release import build_student_release
 
     tmp = tmp_path_factory.mktemp("browser")
     course = build_student_release(tmp / "course")

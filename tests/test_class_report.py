@@ -21,18 +21,21 @@ import pytest
 from autograder.outputs.batch_output import read_results
 from autograder.outputs.class_report import (REPORT_DIR, analyse, class_table, html_page, item_rest_correlation,
                                              markdown, write_class_report)
-from autograder.report import markdown_text
-from autograder.results import GRADED, GRADER_ERROR, UNGRADABLE, GradeResult, StubResult
-from autograder.results import TestOutcome as Outcome
+from autograder.outputs.text import markdown_text
+from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE, GradeResult, Reason, StubResult
+from autograder.core.results import TestOutcome as Outcome
 from conftest import REPO, with_cells
 
 NOT_DONE = "not implemented yet: the stub still raises NotImplementedError"
 
 
-def result(name: str, passed: dict[str, list[bool]], status: str = GRADED, message: str = "wrong value") -> GradeResult:
-    """A result with stubs ``a`` (tests of 2, 1 points) and ``b`` (one test of 3 points): True passes."""
+def result(name: str, passed: dict[str, list[bool]], status: str = GRADED, message: str = "wrong value",
+           reason: Reason = Reason.WRONG) -> GradeResult:
+    """A result with stubs ``a`` (tests of 2, 1 points) and ``b`` (one test of 3 points): True passes, a
+    failure has ``message`` and ``reason``."""
     points = {"a": [2.0, 1.0], "b": [3.0]}
-    stubs = [StubResult(stub, [Outcome(f"{stub} test {i}", stub, p, ok, "" if ok else message, f"hint {stub}{i}")
+    stubs = [StubResult(stub, [Outcome(f"{stub} test {i}", stub, p, ok, "" if ok else message, f"hint {stub}{i}",
+                                       reason=Reason.PASSED if ok else reason)
                                for i, (p, ok) in enumerate(zip(points[stub], passed[stub]))])
              for stub in passed]
     return GradeResult("hw0_setup", name, stubs, [], [], None if status == GRADED else "unreadable", status=status)
@@ -43,8 +46,9 @@ def synthetic_class() -> dict[str, GradeResult]:
             "s2": result("s2", {"a": [True, False], "b": [False]}),
             "s3": result("s3", {"a": [False, False], "b": [True]}),
             "s4": result("s4", {"a": [True, True], "b": [False]}),
-            "s5": result("s5", {"a": [False, False], "b": [False]}, message=NOT_DONE),
-            "s6": result("s6", {"a": [False, False], "b": [False]}, status=UNGRADABLE, message="unreadable"),
+            "s5": result("s5", {"a": [False, False], "b": [False]}, message=NOT_DONE, reason=Reason.NOT_IMPLEMENTED),
+            "s6": result("s6", {"a": [False, False], "b": [False]}, status=UNGRADABLE, message="unreadable",
+                         reason=Reason.LOST),
             "s7": result("s7", {}, status=GRADER_ERROR)}
 
 
@@ -232,3 +236,15 @@ def test_results_of_two_suite_versions_are_reported_with_a_warning():
     for result_ in results.values():
         result_.suite_version = "v1"
     assert "versions of the hidden suite" not in markdown(analyse("hw0_setup", results), {"totals": "", "stubs": ""})
+
+
+def test_attempts_are_read_from_the_recorded_reason_never_from_the_words():
+    """Rewording the feedback cannot change the item analysis: a stub was attempted unless every test of it
+    failed as not implemented or missing."""
+    reworded = {"s1": result("s1", {"a": [False, False], "b": [False]}, message="not implemented yet (reworded)",
+                             reason=Reason.WRONG),
+                "s2": result("s2", {"a": [False, False], "b": [False]}, message="some new wording",
+                             reason=Reason.NOT_IMPLEMENTED),
+                "s3": result("s3", {"a": [False, False], "b": [False]}, message="", reason=Reason.MISSING)}
+    table = class_table(reworded)
+    assert table.attempted.tolist() == [[True, True], [False, False], [False, False]]

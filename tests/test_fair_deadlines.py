@@ -14,9 +14,9 @@ import time
 
 import pytest
 
-from autograder.grader import Grader
+from autograder.core.grader import Grader
 from autograder.sandbox.config import Limits
-from autograder.session import CPU_WAIT_STRETCH
+from autograder.core.session import CPU_WAIT_STRETCH
 from conftest import REPO, with_cells
 
 pytestmark = [pytest.mark.slow,  # three gradings on a deliberately starved CPU
@@ -33,7 +33,7 @@ SUBMISSION = REPO / "tests/fixtures/course/assignments/fx/fx.ipynb"
 
 @pytest.fixture(scope="module")
 def grader():
-    from autograder import course
+    from autograder.core import course
 
     saved = course.REPO
     course.REPO = REPO / "tests" / "fixtures" / "course"

@@ -17,9 +17,9 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from autograder.demo import differences
-from autograder import results
-from autograder.results import GRADED, GRADER_ERROR, GradeResult, StubResult
+from autograder.authoring.demo import differences
+from autograder.core import results
+from autograder.core.results import GRADED, GRADER_ERROR, GradeResult, StubResult
 from conftest import FIXTURE_COURSE, REPO, with_cells
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
@@ -103,7 +103,8 @@ def test_demo_fails_on_a_broken_sandbox_and_passes_once_mended(course_copy, open
 
 
 def test_gradescope_run_leaves_no_results_when_the_grader_fails(course_copy, open_tmp, monkeypatch):
-    from autograder import course, gradescope
+    from autograder.core import course
+    from autograder.outputs import gradescope
 
     _break_sandbox(course_copy)
     monkeypatch.setattr(course, "REPO", course_copy)
@@ -117,8 +118,8 @@ def test_gradescope_run_leaves_no_results_when_the_grader_fails(course_copy, ope
 
 
 def test_a_setup_cell_that_fails_alone_is_the_graders_fault(course_copy, open_tmp, monkeypatch):
-    from autograder import course
-    from autograder.grader import Grader
+    from autograder.core import course
+    from autograder.core.grader import Grader
 
     release = course_copy / "assignments/fx/fx.ipynb"
     nb = nbformat.read(str(release), as_version=4)
@@ -135,8 +136,8 @@ def test_a_setup_cell_that_fails_alone_is_the_graders_fault(course_copy, open_tm
 
 def test_a_setup_cell_broken_by_a_stub_cell_is_the_students_fault(open_tmp, monkeypatch):
     """A stub cell that deletes a name a later setup cell needs costs the student, not a grader error."""
-    from autograder import course
-    from autograder.grader import Grader
+    from autograder.core import course
+    from autograder.core.grader import Grader
 
     monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
     release = nbformat.read(str(FIXTURE_COURSE / "assignments/fx/fx.ipynb"), as_version=4)
@@ -145,7 +146,7 @@ def test_a_setup_cell_broken_by_a_stub_cell_is_the_students_fault(open_tmp, monk
     release.cells.insert(4, later_setup)
     nbformat.write(release, str(copy))
     grader = Grader("fx")
-    grader.plan = __import__("autograder.notebook", fromlist=["release_plan"]).release_plan(release)
+    grader.plan = __import__("autograder.core.notebook", fromlist=["release_plan"]).release_plan(release)
     try:
         sneaky = with_cells(SOLUTION, open_tmp / "sneaky.ipynb", {
             "scaled_sum": "del SCALE\ndef scaled_sum(x):\n    return x.sum(axis=-1)"})

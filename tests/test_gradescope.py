@@ -11,9 +11,9 @@ import sys
 import zipfile
 from pathlib import Path
 
-from autograder.gradescope import build_bundle
-from autograder.grader import Grader
-from autograder.report import gradescope_results
+from autograder.outputs.gradescope import build_bundle
+from autograder.core.grader import Grader
+from autograder.outputs.gradescope import gradescope_results
 from conftest import REPO
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it

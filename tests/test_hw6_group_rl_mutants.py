@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import pytest
 
-from autograder import course
-from autograder.batch import run_batch
-from autograder.samples import solution_sources
+from autograder.core import course
+from autograder.outputs.files import grade_folder
+from autograder.authoring.samples import solution_sources
 from conftest import with_cells
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
@@ -98,7 +98,7 @@ def test_every_mutant_loses_points_on_its_own_stub_and_only_there(open_tmp):
             name = f"{stub}__{i}"
             names[name] = (stub, label)
             with_cells(complete, folder / f"{name}.ipynb", {stub: solved[stub].replace(old, new)})
-    results = {r.submission: r for r in run_batch(ID, folder, open_tmp / "out", jobs=2, progress=False)}
+    results = {r.submission: r for r in grade_folder(ID, folder, open_tmp / "out", jobs=2, progress=False)}
     survivors, leaks, report = [], [], {}
     for name, (stub, label) in names.items():
         scores = {s.name: (s.score, s.max_score) for s in results[name].stubs}

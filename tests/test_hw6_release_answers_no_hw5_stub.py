@@ -15,8 +15,8 @@ import inspect
 
 import pytest
 
-from autograder import course
-from autograder.batch import run_batch
+from autograder.core import course
+from autograder.outputs.files import grade_folder
 from conftest import with_cells
 from rlcourse import group_rl as G
 
@@ -55,7 +55,7 @@ def test_no_hw6_helper_earns_a_point_on_any_hw5_stub_and_the_former_helper_would
         with_cells(complete, folder / f"aliases_{k:02d}.ipynb",
                    {stub: f"from rlcourse.group_rl import {helper} as {stub}\n" for stub, helper in chosen.items()})
     with_cells(complete, folder / "control.ipynb", {"token_log_probs": FORMER_HELPER})
-    results = {r.submission: r for r in run_batch(HW5, folder, open_tmp / "out", jobs=2, progress=False)}
+    results = {r.submission: r for r in grade_folder(HW5, folder, open_tmp / "out", jobs=2, progress=False)}
 
     control = {s.name: (s.score, s.max_score) for s in results["control"].stubs}
     assert control["token_log_probs"][0] == control["token_log_probs"][1] > 0, control

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from autograder.intake import (MAX_CELL_BYTES, NotebookError, open_regular, read_capped, read_cells,
+from autograder.core.intake import (MAX_CELL_BYTES, NotebookError, open_regular, read_capped, read_cells,
                                read_code_cells, walk_notebooks)
-from autograder.notebook import find_stubs, read_submission
+from autograder.core.notebook import find_stubs, read_submission
 from conftest import FIXTURE_COURSE
 
 RELEASE = FIXTURE_COURSE / "assignments/fx/fx.ipynb"
@@ -148,8 +148,8 @@ def test_format_3_notebooks_are_converted(tmp_path):
 
 
 def test_a_reader_that_cannot_run_is_the_graders_fault_not_the_submissions(monkeypatch):
-    from autograder import intake
-    from autograder.results import GraderError
+    from autograder.core import intake
+    from autograder.core.results import GraderError
 
     monkeypatch.setattr(intake.sys, "executable", "/bin/false")  # exits 1 before reading anything
     with pytest.raises(GraderError, match="could not run"):

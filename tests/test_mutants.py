@@ -1,11 +1,12 @@
-"""The mutation tool (autograder/mutants.py): which mutants it makes, and an end-to-end run on the fixture course."""
+"""The mutation tool (autograder/authoring/mutants.py): which mutants it makes, and an end-to-end run on the fixture course."""
 from __future__ import annotations
 
 import json
 
 import pytest
 
-from autograder import course, mutants
+from autograder.authoring import mutants
+from autograder.core import course
 from conftest import FIXTURE_COURSE
 
 STUB = '''def masked_mean(x, mask, axis=-1):

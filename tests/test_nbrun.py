@@ -6,7 +6,7 @@ import pytest
 import nbformat
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
-from autograder.nbrun import inject_parameters, run_notebook
+from autograder.authoring.nbrun import inject_parameters, run_notebook
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 

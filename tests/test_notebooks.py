@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from autograder import course
-from autograder.nbrun import run_notebook
+from autograder.core import course
+from autograder.authoring.nbrun import run_notebook
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 

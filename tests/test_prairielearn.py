@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from autograder import prairielearn
-from autograder.results import GRADER_ERROR, GradeResult, GraderError, StubResult
-from autograder.results import TestOutcome as Outcome
+from autograder.outputs import prairielearn
+from autograder.core.results import GRADER_ERROR, GradeResult, GraderError, StubResult
+from autograder.core.results import TestOutcome as Outcome
 from conftest import REPO
 
 SAMPLES = REPO / "autograder/samples/hw0_setup"
@@ -99,7 +99,7 @@ def test_when_the_grader_cannot_start_the_results_say_so(tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise GraderError("the reference solution could not be built")
 
-    monkeypatch.setattr("autograder.batch.Grader", broken)
+    monkeypatch.setattr("autograder.core.batch.Grader", broken)
     (tmp_path / "student").mkdir()
     shutil.copy(SAMPLES / "complete.ipynb", tmp_path / "student" / "hw0_setup.ipynb")
     assert prairielearn.run("hw0_setup", tmp_path) == 1

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from autograder.session import LocalTransport, Namespace, ReferenceCache
+from autograder.core.session import LocalTransport, Namespace, ReferenceCache
 from autograder.suite import lend
 
 

@@ -9,8 +9,8 @@ import sysconfig
 
 import pytest
 
-from autograder import course
-from autograder.release import build_student_release, find_leaks, generate_assignments, notebook_signature
+from autograder.core import course
+from autograder.authoring.release import build_student_release, find_leaks, generate_assignments, notebook_signature
 from conftest import REPO
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
@@ -71,7 +71,7 @@ def test_student_release_is_clean_and_hw0_runs_there(tmp_path):
 
 
 def test_a_solution_file_in_the_release_is_refused(tmp_path, monkeypatch):
-    import autograder.release as release
+    import autograder.authoring.release as release
 
     monkeypatch.setattr(release.course, "STUDENT_RELEASE", (*release.course.STUDENT_RELEASE, "solutions"))
     with pytest.raises(SystemExit, match="leak"):

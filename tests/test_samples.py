@@ -5,8 +5,8 @@ import json
 
 import pytest
 
-from autograder import course
-from autograder.batch import run_batch
+from autograder.core import course
+from autograder.outputs.files import grade_folder
 from conftest import FIXTURE_COURSE, with_cells
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
@@ -16,7 +16,7 @@ WITH_SAMPLES = [i for i in course.assignment_ids() if (course.samples_dir(i) / "
 
 def _check(assignment, open_tmp):
     expected = json.loads((course.samples_dir(assignment) / "expected.json").read_text())
-    results = {r.submission: r for r in run_batch(assignment, course.samples_dir(assignment), open_tmp / "out",
+    results = {r.submission: r for r in grade_folder(assignment, course.samples_dir(assignment), open_tmp / "out",
                                                   jobs=2, progress=False)}
     assert set(results) == set(expected)
     for sample, outcome in expected.items():
@@ -56,6 +56,6 @@ def test_the_worked_examples_mutants_lose_points_where_contributing_says(open_tm
     folder = open_tmp / "mutants"
     for name, (cells, _) in MUTANTS.items():
         with_cells(FIXTURE_COURSE / "autograder/samples/ex/complete.ipynb", folder / f"{name}.ipynb", cells)
-    results = {r.submission: r for r in run_batch("ex", folder, open_tmp / "out", jobs=2, progress=False)}
+    results = {r.submission: r for r in grade_folder("ex", folder, open_tmp / "out", jobs=2, progress=False)}
     got = {name: tuple(s.score for s in results[name].stubs) for name in MUTANTS}
     assert got == {name: want for name, (_, want) in MUTANTS.items()}

@@ -10,9 +10,9 @@ import time
 
 import pytest
 
-from autograder import course, supervisor
+from autograder.core import course, supervisor
 from autograder.sandbox.config import SpawnConfig
-from autograder.supervisor import SandboxStartError, Zygote
+from autograder.core.supervisor import SandboxStartError, Zygote
 
 IMPORT_SECONDS = 6.0
 START_TIMEOUT = 5.0  # shorter than the imports, far longer than a worker's start

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from autograder.batch import Shard
+from autograder.core.batch import Shard
 from autograder.outputs.merge import MergeRefused, merge
 from conftest import REPO
 

@@ -14,13 +14,13 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from autograder import course
+from autograder.core import course
 from autograder.outputs.class_report import write_class_report
 from autograder.outputs.similarity import (NEVER_A_GRADE, StubCode, joined_stubs, read_stub_code, release_code,
                                            similar_pairs)
-from autograder.report import write_gradebook, write_outputs
-from autograder.results import GradeResult, StubResult
-from autograder.results import TestOutcome as Outcome
+from autograder.outputs.files import write_gradebook, write_outputs
+from autograder.core.results import GradeResult, StubResult
+from autograder.core.results import TestOutcome as Outcome
 
 ASSIGNMENT = "hw1_imitation"
 STUB_END = "    # YOUR CODE HERE\n    raise NotImplementedError()"

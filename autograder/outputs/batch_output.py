@@ -1,7 +1,7 @@
 """Reading what ``python -m autograder batch`` wrote: one folder per submission holding ``result.json``.
 
 A batch's output folder (``--out DIR``) holds ``gradebook.csv`` and one folder per submission,
-named by the submission's safe name (``autograder.batch.unique_safe_names``). Names made safe
+named by the submission's safe name (``autograder.core.batch.unique_safe_names``). Names made safe
 never start with ``_`` or ``.``, so this room keeps its own files under names that do:
 ``_previous/<stamp>/`` (results archived by a regrade) and ``_students.json`` (which nbgrader
 student each submission belongs to, written by the gradebook sync).
@@ -11,8 +11,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from autograder.report import RESULT_NAME
-from autograder.results import GradeResult, result_from_dict
+from autograder.core.store import RESULT_NAME
+from autograder.core.results import GradeResult, result_from_dict
 
 PREVIOUS_DIR = "_previous"
 """Where a regrade archives the results it replaces: ``DIR/_previous/<UTC stamp>/<submission>/``."""

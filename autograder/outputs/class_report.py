@@ -31,13 +31,12 @@ import numpy as np
 from autograder.outputs.batch_output import read_results
 from autograder.outputs.similarity import (NEVER_A_GRADE, Pair, StubCode, pair_page, read_stub_code, release_code,
                                            similar_pairs, THRESHOLD)
-from autograder.report import atomic_write, cap, markdown_text, plain
-from autograder.results import GRADED, GRADER_ERROR, GradeResult
+from autograder.core.store import atomic_write
+from autograder.outputs.text import cap, markdown_text, plain
+from autograder.core.results import GRADED, GRADER_ERROR, GradeResult
 
 REPORT_DIR = "_class_report"
 """The report's folder inside the batch folder (a name no submission's safe name takes; see batch_output)."""
-NOT_ATTEMPTED = ("not implemented yet", "no cell defines")
-"""How a failed test's message starts when the stub was never written (the grader's wording)."""
 TOP_FAILURES = 10
 MESSAGE_SHOWN = 160
 """A failure message is counted and shown by its first line, cut here (it may quote a student's exception)."""
@@ -89,7 +88,8 @@ class ClassTable:
 
 
 def _attempted(stub_tests: list) -> bool:
-    return bool(stub_tests) and not all((not t.passed) and t.message.startswith(NOT_ATTEMPTED) for t in stub_tests)
+    """Whether any of a stub's tests shows an attempt (its recorded :class:`Reason`, never its message)."""
+    return any(t.reason.attempted for t in stub_tests)
 
 
 def class_table(results: dict[str, GradeResult]) -> ClassTable:

@@ -72,7 +72,7 @@ def _cmd_diff(args: argparse.Namespace) -> int:
 
 
 def _cmd_class_report(args: argparse.Namespace) -> int:
-    from autograder import course
+    from autograder.core import course
     from autograder.outputs.class_report import REPORT_DIR, write_class_report
 
     course.check_assignment(args.assignment)

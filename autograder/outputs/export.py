@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from autograder.outputs.gradebook import course_directory, open_gradebook
-from autograder.report import plain
+from autograder.outputs.text import plain
 
 
 @dataclass

@@ -16,12 +16,45 @@ import subprocess
 import sys
 from pathlib import Path
 
-from autograder import course
+from autograder.core import course
 from autograder.outputs.batch_output import read_results, read_students
 from autograder.outputs.gradebook import course_directory, open_gradebook, with_nbgrader_path
-from autograder.report import FEEDBACK_NAME, atomic_write, feedback_markdown, markdown_text
-from autograder.results import GRADER_ERROR, GradeResult
+from autograder.core.store import atomic_write
+from autograder.outputs.text import MESSAGE_CHARS, NAME_CHARS, NOTE_CHARS, cap, markdown_text, points
+from autograder.core.results import GRADER_ERROR, GradeResult
 
+
+
+FEEDBACK_NAME = "feedback.md"
+"""Each submission's feedback file, in its batch folder (and in the course's feedback/ after a sync)."""
+
+
+def feedback_markdown(result: GradeResult) -> str:
+    """The per-student feedback file: per stub, what passed, what failed and a hint."""
+    out = [f"# Feedback: {result.assignment} · {markdown_text(cap(result.submission, NAME_CHARS))}", "",
+           f"**Automatic score: {points(result.score)} / {points(result.max_score)}**", ""]
+    if result.error:
+        out += [f"> This submission could not be graded automatically: {markdown_text(cap(result.error, MESSAGE_CHARS))}",
+                ""]
+    for note in result.notes:
+        out.append(f"- note: {markdown_text(cap(note, NOTE_CHARS))}")
+    if result.notes:
+        out.append("")
+    for stub in result.stubs:
+        out += [f"## `{stub.name}`: {points(stub.score)} / {points(stub.max_score)}", ""]
+        for test in stub.tests:
+            if test.passed:
+                out.append(f"- ✓ {test.name}")
+            else:
+                out.append(f"- ✗ {test.name}: {markdown_text(cap(test.message, MESSAGE_CHARS))}")
+                if test.hint:
+                    out.append(f"  - *hint:* {test.hint}")
+        out.append("")
+    if result.manual:
+        out += ["## Written answers (graded by hand)", ""]
+        out += [f"- `{gid}`: {points(p)} point(s), pending" for gid, p in result.manual]
+        out.append("")
+    return "\n".join(out)
 
 def _points(value: float | None) -> str:
     return f"{round(value, 6):g}" if value is not None else "-"

@@ -36,12 +36,13 @@ from pathlib import Path
 
 import nbformat
 
-from autograder import course
-from autograder.batch import Entry, discover, unique_safe_names
-from autograder.notebook import NotebookError, find_stubs, manual_cells, read_notebook, read_submission
+from autograder.core import course
+from autograder.core.batch import Entry, discover, unique_safe_names
+from autograder.core.notebook import NotebookError, find_stubs, manual_cells, read_notebook, read_submission
 from autograder.outputs.batch_output import STUDENTS_NAME, read_results, read_students
-from autograder.report import atomic_write, markdown_text, plain
-from autograder.results import GRADED, GRADER_ERROR, GradeResult, GraderError
+from autograder.core.store import atomic_write
+from autograder.outputs.text import markdown_text, plain
+from autograder.core.results import GRADED, GRADER_ERROR, GradeResult, GraderError
 
 GRADESCOPE_METADATA = "submission_metadata.yml"
 MISSING_CELL = "(No cell with this id was found in the submission; the answer may be elsewhere in the notebook.)"

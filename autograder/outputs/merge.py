@@ -22,11 +22,12 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
-from autograder import course
-from autograder.batch import GRADEBOOK_NAME, MANIFEST_PATTERN
+from autograder.core import course
+from autograder.core.batch import GRADEBOOK_NAME, MANIFEST_PATTERN
 from autograder.outputs.batch_output import read_result
-from autograder.report import atomic_write, write_gradebook
-from autograder.results import GradeResult
+from autograder.core.store import atomic_write
+from autograder.outputs.files import write_gradebook
+from autograder.core.results import GradeResult
 
 MERGED_NAME = "_merged.json"
 

@@ -22,11 +22,12 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from autograder import course
-from autograder.batch import GRADEBOOK_NAME, discover, run_batch
+from autograder.core import course
+from autograder.core.batch import GRADEBOOK_NAME, discover
+from autograder.outputs.files import grade_folder
 from autograder.outputs.batch_output import PREVIOUS_DIR, read_results, read_students
-from autograder.report import RESULT_NAME
-from autograder.results import GradeResult
+from autograder.core.store import RESULT_NAME
+from autograder.core.results import GradeResult
 
 
 @dataclass
@@ -154,7 +155,7 @@ def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None
     kept = archive(out_dir, [n for n in names if n in before])
     for name in names:
         (out_dir / name / RESULT_NAME).unlink(missing_ok=True)
-    run_batch(assignment, folder, out_dir, jobs=jobs, progress=progress)
+    grade_folder(assignment, folder, out_dir, jobs=jobs, progress=progress)
     changes = compare(before, read_results(out_dir), names)
     synced = bool(read_students(out_dir))
     written = None

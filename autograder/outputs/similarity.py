@@ -1,7 +1,7 @@
 """Pairs of submissions whose stub code is suspiciously alike, for an instructor to look at; never a grade.
 
 Only the code of the stub cells is compared (matched as grading matches them, by
-:func:`autograder.notebook.find_stubs` on what :func:`autograder.intake.read_code_cells` read safely
+:func:`autograder.core.notebook.find_stubs` on what :func:`autograder.core.intake.read_code_cells` read safely
 in a child process), joined in the assignment's stub order, so moving cells around changes nothing.
 Fingerprints come from ``copydetect`` (winnowing over Pygments tokens, as MOSS does): names become
 one placeholder and comments, docstrings and whitespace are dropped before hashing, so renaming
@@ -25,11 +25,11 @@ from copydetect.utils import filter_code, get_token_coverage, highlight_overlap,
 from pygments.lexers import PythonLexer
 from pygments.token import String
 
-from autograder import course
-from autograder.batch import discover
-from autograder.intake import NotebookError, read_code_cells
-from autograder.notebook import find_stubs, read_notebook
-from autograder.results import GraderError
+from autograder.core import course
+from autograder.core.batch import discover
+from autograder.core.intake import NotebookError, read_code_cells
+from autograder.core.notebook import find_stubs, read_notebook
+from autograder.core.results import GraderError
 
 NOISE_TOKENS = 25
 """Matches shorter than this many filtered characters are ignored (copydetect's ``noise_t``)."""

@@ -11,5 +11,5 @@ Three processes run code from this package, and each module says which:
 
 Nothing here imports the grader, the suites or the reference: a student's code
 runs next to this package and must find nothing in it worth reading. The
-grader's handle on workers lives outside, in :mod:`autograder.supervisor`.
+grader's handle on workers lives outside, in :mod:`autograder.core.supervisor`.
 """

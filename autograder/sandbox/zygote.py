@@ -1,7 +1,7 @@
 """The zygote and the launcher. Runs in the sandbox's own processes, never in the grader.
 
 The grader starts the zygote as a fresh interpreter (``python -m autograder.sandbox.zygote``, see
-:mod:`autograder.supervisor`), never as a fork of itself: every worker is forked from the zygote
+:mod:`autograder.core.supervisor`), never as a fork of itself: every worker is forked from the zygote
 and inherits its memory, which therefore holds this package and the preloaded libraries and
 nothing of the grader (no reference namespace, no suite, no solution text). The zygote imports the assignment's libraries once (torch, gymnasium, ... take over a
 second) and then, for each request on its socket, forks a *launcher*, which enters new namespaces

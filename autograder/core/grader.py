@@ -22,19 +22,20 @@ from typing import Any, Iterable
 import numpy as np
 import pytest
 
-from autograder import course
-from autograder.intake import NotebookError, read_code_cells
-from autograder.notebook import find_stubs, imported_modules, manual_cells, read_notebook, release_plan, with_parameters
-from autograder.results import (GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, StubResult, TestOutcome)
+from autograder.core import course
+from autograder.core.intake import NotebookError, read_code_cells
+from autograder.core.notebook import find_stubs, imported_modules, manual_cells, read_notebook, release_plan, with_parameters
+from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, Reason, StubResult, TestOutcome
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
-from autograder.session import (HELPERS, Cell, CellStatus, LocalTransport, Namespace, ReferenceCache,
-                                SandboxFailure, SandboxTimeout, Session, StudentError)
-from autograder.supervisor import Zygote
+from autograder.core.session import (HELPERS, Cell, CellStatus, LocalTransport, Namespace, ReferenceCache,
+                                     SandboxFailure, SandboxTimeout, Session, StudentError, failure_reason)
+from autograder.core.supervisor import Zygote
 
 FAST_PARAMETERS = {"FAST": True}
 SANDBOX_HELPERS = "sandbox_helpers.py"
-"""A suite's trusted helper module: runs in the sandbox after every cell, reached as ``student.helpers``."""
+"""A suite's trusted helper module: runs in the sandbox after every cell, reached as ``student.helpers``, after the
+helpers common to every suite (:func:`autograder.core.course.common_helpers`)."""
 SUITE_LOG_CHARS = 3000
 """The end of pytest's own output quoted when a suite cannot run (the traceback that matters is last)."""
 REFERENCE_ERROR_CHARS = 300
@@ -48,6 +49,8 @@ whose only fixtures are ours; feedback is built from the exception, so pytest fo
 
 def feedback_message(exc: BaseException) -> str:
     """What a failed test tells the student."""
+    if isinstance(exc, CellNotRun):
+        return str(exc)
     if isinstance(exc, StudentError):
         if exc.not_implemented:
             return "not implemented yet: the stub still raises NotImplementedError"
@@ -64,6 +67,25 @@ def feedback_message(exc: BaseException) -> str:
         return str(exc.msg)
     return (f"the result could not be checked ({type(exc).__name__}: {str(exc)[:REFERENCE_ERROR_CHARS]}); "
             "check its type and shape")
+
+
+class CellNotRun(Exception):
+    """A test's stub did not run (missing, unreadable, raising, hanging): the test fails for the cell's reason."""
+
+    def __init__(self, status: CellStatus) -> None:
+        super().__init__(status.message)
+        self.status = status
+
+
+def test_reason(exc: BaseException | None) -> Reason:
+    """Why a hidden test failed (or :attr:`Reason.PASSED`), from the exception that ended it."""
+    if exc is None:
+        return Reason.PASSED
+    if isinstance(exc, CellNotRun):
+        return exc.status.reason
+    if isinstance(exc, (StudentError, SandboxFailure)):
+        return failure_reason(exc)
+    return Reason.WRONG
 
 
 class SuitePlugin:
@@ -89,7 +111,7 @@ class SuitePlugin:
         stub = marker.kwargs["name"] if marker else None
         status = self.status.get(stub)
         if status is not None and not status.ok:
-            pytest.fail(status.message, pytrace=False)
+            raise CellNotRun(status)
         if self.session is not None:  # from here, the test's calls share one deadline
             self.session.begin_test()
         # The other stubs this one calls run as the reference while it is tested: one mistake, one loss.
@@ -125,12 +147,13 @@ class SuitePlugin:
                 self.grader_faults.append(f"{item.name}: {exc}")
             if isinstance(exc, SandboxTimeout) and marker:
                 # Later checks of a stub that hangs would each wait out the limit again: fail them at once.
-                self.status[kwargs["name"]] = CellStatus(False, f"not run: an earlier check of this stub {exc}")
+                self.status[kwargs["name"]] = CellStatus(False, f"not run: an earlier check of this stub {exc}",
+                                                         Reason.TIMEOUT)
             self.outcomes.append(TestOutcome(
                 name=_title(item), stub=kwargs["name"], points=float(kwargs.get("points", 0)), passed=report.passed,
                 message="" if exc is None else feedback_message(exc),
                 hint=None if report.passed else kwargs.get("hint"),  # a hint is for a failed test only
-                seconds=report.duration))
+                seconds=report.duration, reason=Reason.PASSED if report.passed else test_reason(exc)))
 
 
 def _title(item: pytest.Item) -> str:
@@ -174,8 +197,8 @@ class Grader:
         course.check_assignment(assignment)
         self.assignment, self.limits = assignment, limits or course.limits(assignment)
         self.suite = course.suite_dir(assignment)
-        helpers = self.suite / SANDBOX_HELPERS
-        self.helpers = helpers.read_text() if helpers.is_file() else None
+        helpers = [path.read_text() for path in (course.common_helpers(), self.suite / SANDBOX_HELPERS) if path.is_file()]
+        self.helpers = "\n\n".join(helpers) if helpers else None
         release = read_notebook(course.release_notebook(assignment))
         self.plan = release_plan(release)
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
@@ -287,10 +310,11 @@ class Grader:
             raise GraderError(f"the released notebook's setup fails in the sandbox: {failure}")
         for stub in self.expected:
             session.status[stub] = CellStatus(False, "the notebook's setup failed after your cells ran (does a "
-                                                     f"cell of yours redefine or delete a name it uses?): {failure}")
+                                                     f"cell of yours redefine or delete a name it uses?): {failure}",
+                                              Reason.EXCEPTION)
 
     def grader_error(self, name: str, reason: str, notes: list[str] = (), start: float | None = None) -> GradeResult:
-        """A result that says the grader failed: no stubs, no score (see :mod:`autograder.results`)."""
+        """A result that says the grader failed: no stubs, no score (see :mod:`autograder.core.results`)."""
         seconds = 0.0 if start is None else time.monotonic() - start
         return GradeResult(self.assignment, name, [], list(self.manual), list(notes), reason, seconds=seconds,
                            status=GRADER_ERROR, suite_version=self.version)
@@ -318,7 +342,8 @@ class Grader:
 
     def ungradable(self, name: str, reason: str, notes: list[str] = ()) -> GradeResult:
         """A result with every hidden test failed for ``reason``: the submission stays in the gradebook."""
-        failed = [TestOutcome(t.name, t.stub, t.points, False, reason, t.hint) for t in self.catalogue]
+        failed = [TestOutcome(t.name, t.stub, t.points, False, reason, t.hint, reason=Reason.LOST)
+                  for t in self.catalogue]
         return GradeResult(self.assignment, name, self._collect(failed), list(self.manual), list(notes), reason,
                            status=UNGRADABLE, suite_version=self.version)
 

@@ -22,9 +22,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from autograder import course
-from autograder.report import MESSAGE_CHARS, NOTE_CHARS, cap, plain
-from autograder.results import GRADER_ERROR, UNGRADABLE, GradeResult
+from autograder.core import course
+from autograder.outputs.text import MESSAGE_CHARS, NOTE_CHARS, cap, plain
+from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult
 
 RESULTS_BYTES = 1_000_000
 """PrairieLearn's limit on ``results.json``."""
@@ -102,7 +102,7 @@ def write_results(results: dict[str, Any], root: Path) -> Path:
 
 def run(assignment: str, root: Path) -> int:
     """Grade the submission under ``root/student``; always leaves a ``results.json`` (exit 0 when graded)."""
-    from autograder.batch import grade_upload
+    from autograder.core.batch import grade_upload
 
     root = Path(root)
     try:

@@ -13,9 +13,36 @@ A result has one of three statuses:
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from enum import Enum
 from typing import Any
 
 GRADED, UNGRADABLE, GRADER_ERROR = "graded", "ungradable", "grader_error"
+
+
+class Reason(str, Enum):
+    """Why a hidden test came out as it did, decided where it is known (the session, the suite runner),
+    stored with the outcome and read by every report: no report infers it from a message's words."""
+
+    PASSED = "passed"
+    WRONG = "wrong"                      # the code ran and a check on its result failed
+    NOT_IMPLEMENTED = "not_implemented"  # the stub (or a cell it needs) still raises NotImplementedError
+    MISSING = "missing"                  # no cell defines the stub, or the name the test calls
+    UNREADABLE = "unreadable"            # the stub's cell is damaged or over the size cap: it was not run
+    SYNTAX = "syntax"                    # the stub's cell does not compile
+    EXCEPTION = "exception"              # the code raised an exception (while its cell ran, or when called)
+    TIMEOUT = "timeout"                  # the code ran past its time limit
+    CRASH = "crash"                      # the worker died, or sent garbage, while running the code
+    LOST = "lost"                        # never judged: the submission as a whole could not be graded
+    UNKNOWN = "unknown"                  # a record written before reasons were recorded
+
+    @property
+    def attempted(self) -> bool:
+        """Whether a test with this outcome shows the student tried the stub."""
+        return self not in (Reason.NOT_IMPLEMENTED, Reason.MISSING, Reason.LOST)
+
+
+SYNTAX_ERRORS = frozenset({"SyntaxError", "IndentationError", "TabError"})
+"""The exception types (by name) of a cell that does not compile."""
 
 
 class GraderError(RuntimeError):
@@ -31,6 +58,10 @@ class TestOutcome:
     message: str = ""
     hint: str | None = None
     seconds: float = 0.0
+    reason: Reason = Reason.UNKNOWN
+
+    def __post_init__(self) -> None:
+        self.reason = Reason(self.reason)
 
 
 @dataclass
@@ -60,7 +91,7 @@ class GradeResult:
     seconds: float = 0.0
     status: str = GRADED
     suite_version: str = ""
-    """:func:`autograder.course.suite_version` of the suite that graded it (empty in results older than it)."""
+    """:func:`autograder.core.course.suite_version` of the suite that graded it (empty in results older than it)."""
 
     @property
     def score(self) -> float:
@@ -78,6 +109,9 @@ class GradeResult:
 
 def result_to_dict(result: GradeResult) -> dict[str, Any]:
     data = asdict(result)
+    for stub in data["stubs"]:
+        for test in stub["tests"]:
+            test["reason"] = Reason(test["reason"]).value
     if result.has_score:
         data.update(score=result.score, max_score=result.max_score)
     return data

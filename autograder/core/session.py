@@ -15,12 +15,12 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
-from autograder.results import GraderError
+from autograder.core.results import SYNTAX_ERRORS, GraderError, Reason
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import (ChannelClosed, ChannelTimeout, HandleRef, LentRef, ProtocolError, decode,
                                      encode)
 from autograder.sandbox.worker import NotDefined, Worker
-from autograder.supervisor import SandboxStartError, WorkerProcess, Zygote
+from autograder.core.supervisor import SandboxStartError, WorkerProcess, Zygote
 
 START_SECONDS = 30.0
 """A worker that has not reported ready by then is broken (the grader's fault: no student code ran yet)."""
@@ -101,6 +101,21 @@ class Cell:
 class CellStatus:
     ok: bool
     message: str = ""
+    reason: Reason = Reason.PASSED
+    """Why the cell did not run (``ok`` False): every test of its stub fails with this reason."""
+
+
+def failure_reason(err: Exception) -> Reason:
+    """The :class:`Reason` of a failure of student code: its exception's kind, a timeout, a crash."""
+    if isinstance(err, StudentError):
+        if err.not_implemented:
+            return Reason.NOT_IMPLEMENTED
+        if err.not_defined:
+            return Reason.MISSING
+        return Reason.SYNTAX if err.kind in SYNTAX_ERRORS else Reason.EXCEPTION
+    if isinstance(err, SandboxTimeout):
+        return Reason.TIMEOUT
+    return Reason.CRASH
 
 
 @dataclass(frozen=True)
@@ -232,7 +247,7 @@ def _decode_reply(transport: Transport, header: dict[str, Any], blobs: list[byte
 
 
 class ReferenceCache:
-    """Answers of the reference to calls it has seen, kept for the life of a :class:`~autograder.grader.Grader`.
+    """Answers of the reference to calls it has seen, kept for the life of a :class:`~autograder.core.grader.Grader`.
 
     A hidden test asks the reference the same question for every submission (its inputs come from a seed,
     not from the student), so a batch computes each answer once. Only a call of a notebook function by name
@@ -319,9 +334,10 @@ class Session(Transport):
         self.limits: Limits = config.limits
         self.reference_call = reference_call
         self.status: dict[str, CellStatus] = {
-            name: CellStatus(False, f"no cell defines `{name}` (was its cell deleted, or the function renamed?)")
+            name: CellStatus(False, f"no cell defines `{name}` (was its cell deleted, or the function renamed?)",
+                             Reason.MISSING)
             for name in missing}
-        self.status.update({name: CellStatus(False, why) for name, why in (unrunnable or {}).items()})
+        self.status.update({name: CellStatus(False, why, Reason.UNREADABLE) for name, why in (unrunnable or {}).items()})
         self.worker: WorkerProcess | None = None
         self.generation = 0
         self.time_used = 0.0
@@ -362,13 +378,14 @@ class Session(Transport):
             return CellStatus(True)
         except StudentError as err:
             if err.not_implemented:
-                return CellStatus(False, "not implemented yet: the cell still raises NotImplementedError")
-            return CellStatus(False, f"the cell `{cell.label}` failed when run: {err}")
+                return CellStatus(False, "not implemented yet: the cell still raises NotImplementedError",
+                                  Reason.NOT_IMPLEMENTED)
+            return CellStatus(False, f"the cell `{cell.label}` failed when run: {err}", failure_reason(err))
         except SandboxFailure as err:
             message = f"running the cell `{cell.label}` {err}"
             self._spawn()  # a fresh worker for the cells after this one
             self._replay(upto=cell.label)
-            return CellStatus(False, message)
+            return CellStatus(False, message, failure_reason(err))
 
     def _replay(self, upto: str) -> None:
         """Re-run, in a fresh worker, the cells before ``upto`` that ran before."""

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import nbformat
 
-from autograder import course
-from autograder.notebook import read_notebook
+from autograder.core import course
+from autograder.core.notebook import read_notebook
 
 MARKERS = ("### BEGIN SOLUTION", "### END SOLUTION")
 
@@ -99,7 +99,7 @@ def make_samples(assignment: str) -> dict[str, tuple[nbformat.NotebookNode, dict
     The broken samples break a stub that no other stub calls, so that "the rest is done" means
     full marks on the rest whatever the grader can stand in for (see ``Worker.reference_stand_in``).
     """
-    from autograder.grader import stub_dependencies
+    from autograder.core.grader import stub_dependencies
 
     solved = solution_sources(assignment)
     stubs = list(solved)

@@ -17,15 +17,20 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterable, Iterator
 
+from autograder.core import course
+from autograder.core.grader import Grader
+from autograder.core.intake import NotebookError, read_code_cells, walk_notebooks
+from autograder.core.notebook import find_stubs
+from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError
+from autograder.core.store import atomic_write, load_result, save_result
 
-from autograder import course
-from autograder.grader import Grader
-from autograder.intake import NotebookError, read_code_cells, walk_notebooks
-from autograder.notebook import find_stubs
-from autograder.report import RESULT_NAME, write_gradebook, write_outputs
-from autograder.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, result_from_dict
-from rlcourse.progress import progress as shown_progress
+Writer = Callable[[GradeResult, Path], None]
+"""Renders one result into its submission's folder (``autograder.outputs.files.render_files``); called in the
+grading process, before the core records the result, so it must be a module-level function."""
+Progress = Callable[[Iterable, int, str], Iterator]
+"""Wraps the finished gradings (items, total, description) to show progress; the core shows none itself."""
 
 GRADEBOOK_NAME = "gradebook.csv"
 MANIFEST_PATTERN = "_batch-{k}-of-{n}.json"
@@ -205,23 +210,26 @@ def _init(assignment: str, hide: list[str]) -> None:
         _grader_failure = str(err)
 
 
-def _grade_one(entry: Entry, out_dir: str, assignment: str) -> str:
+def _finish(result: GradeResult, folder: Path, write: Writer | None) -> None:
+    """Hand ``result`` to the writer, then record it: the record, written last, marks the submission done."""
+    if write is not None:
+        write(result, folder)
+    save_result(result, folder)
+
+
+def _grade_one(entry: Entry, out_dir: str, assignment: str, write: Writer | None) -> str:
     if _grader is None:
         result = _unscored(assignment, entry, _grader_failure or "the grader could not be built", GRADER_ERROR)
     else:
         result = _grader.grade(entry.notebook, name=entry.name)
     if entry.note:
         result.notes.insert(0, entry.note)
-    write_outputs(result, Path(out_dir) / entry.name)
+    _finish(result, Path(out_dir) / entry.name, write)
     return entry.name
 
 
 def _load(out_dir: Path, name: str) -> GradeResult | None:
-    path = out_dir / name / RESULT_NAME
-    try:
-        return result_from_dict(json.loads(path.read_text()))
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+    return load_result(out_dir / name)
 
 
 def _done(out_dir: Path, name: str) -> bool:
@@ -242,8 +250,6 @@ def names_digest(names: list[str]) -> str:
 
 
 def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list[str], names: list[str]) -> None:
-    from autograder.report import atomic_write
-
     manifest = {"assignment": assignment, "suite_version": course.suite_version(assignment),
                 "shard": [shard.k, shard.n], "folder_submissions": len(all_names),
                 "folder_digest": names_digest(all_names), "submissions": sorted(names)}
@@ -251,12 +257,13 @@ def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list
     atomic_write(out_dir / shard.manifest_name, json.dumps(manifest, indent=1))
 
 
-def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True,
-              shard: Shard = Shard()) -> list[GradeResult]:
-    """Grade every submission (of ``shard``) not yet graded in ``out_dir``, then write the gradebook of them all.
+def run_batch(assignment: str, folder: Path, out_dir: Path, *, write: Writer | None = None, jobs: int = 2,
+              progress: Progress | None = None, shard: Shard = Shard()) -> list[GradeResult]:
+    """Grade every submission (of ``shard``) not yet graded in ``out_dir``; the results of them all, by name.
 
-    A shard writes its own gradebook (``gradebook-K-of-N.csv``) and manifest, so N shards may share one
-    ``out_dir`` on a shared disk or each have their own; ``python -m autograder merge`` joins them.
+    Each result is handed to ``write`` (if given) and recorded in ``out_dir/<name>/result.json``; a shard
+    writes its own manifest, so N shards may share one ``out_dir`` on a shared disk or each have their own.
+    The gradebook is the writers' (``autograder.outputs.files.grade_folder`` writes one).
     """
     out_dir = Path(out_dir)
     course.check_assignment(assignment)
@@ -268,7 +275,7 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
     todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):
-            write_outputs(_unscored(assignment, e, e.problem, UNGRADABLE), out_dir / e.name)
+            _finish(_unscored(assignment, e, e.problem, UNGRADABLE), out_dir / e.name, write)
     attempts = 0
     while todo and attempts < 3:
         attempts += 1
@@ -277,24 +284,23 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progr
             hide = [str(Path(folder).resolve()), str(out_dir.resolve())]
             with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=_init,
                                      initargs=(assignment, hide)) as pool:
-                futures = {pool.submit(_grade_one, e, str(out_dir), assignment): e for e in todo}
-                # A bar in a terminal, a line every few seconds in a log (CI, make demo > file).
-                for future in shown_progress(as_completed(futures), desc=f"grading {assignment}", total=len(futures),
-                                             disable=not progress):
+                futures = {pool.submit(_grade_one, e, str(out_dir), assignment, write): e for e in todo}
+                finished = as_completed(futures)
+                if progress is not None:
+                    finished = progress(finished, len(futures), f"grading {assignment}")
+                for future in finished:
                     entry = futures[future]
                     try:
                         future.result()
                     except BrokenProcessPool:
                         raise
                     except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission, nor grade it
-                        write_outputs(_unscored(assignment, entry, f"internal grader error: {err}", GRADER_ERROR),
-                                      out_dir / entry.name)
+                        _finish(_unscored(assignment, entry, f"internal grader error: {err}", GRADER_ERROR),
+                                out_dir / entry.name, write)
         except BrokenProcessPool:
             pass  # a grading process died; the finished results are on disk, retry the rest
         todo = [e for e in todo if _load(out_dir, e.name) is None]
     for e in todo:
-        write_outputs(_unscored(assignment, e, "the grading process died repeatedly on this submission", GRADER_ERROR),
-                      out_dir / e.name)
-    results = [r for e in entries if (r := _load(out_dir, e.name)) is not None]
-    write_gradebook(results, out_dir / shard.gradebook_name, expected)
-    return results
+        _finish(_unscored(assignment, e, "the grading process died repeatedly on this submission", GRADER_ERROR),
+                out_dir / e.name, write)
+    return [r for e in entries if (r := _load(out_dir, e.name)) is not None]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import nbformat
 
-from autograder import course
+from autograder.core import course
 
 LEAK_PATTERNS = re.compile(r"BEGIN SOLUTION|END SOLUTION|BEGIN HIDDEN TESTS|END HIDDEN TESTS|BEGIN MARK SCHEME")
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".ipynb_checkpoints", "_build", "videos", "*.tmp")

@@ -7,10 +7,11 @@ import json
 import sys
 from pathlib import Path
 
-from autograder import course
-from autograder.batch import GRADEBOOK_NAME, run_batch
-from autograder.report import FEEDBACK_NAME
-from autograder.results import GradeResult
+from autograder.core import course
+from autograder.core.batch import GRADEBOOK_NAME
+from autograder.outputs.files import grade_folder
+from autograder.outputs.feedback import FEEDBACK_NAME
+from autograder.core.results import GradeResult
 
 
 def _table(path: Path) -> str:
@@ -57,7 +58,7 @@ def run_demo(out: Path, jobs: int = 2) -> int:
     problems = []
     for assignment in ids:
         target = Path(out) / assignment
-        results = run_batch(assignment, course.samples_dir(assignment), target, jobs=jobs)
+        results = grade_folder(assignment, course.samples_dir(assignment), target, jobs=jobs)
         print(f"\n{assignment}: gradebook {target / GRADEBOOK_NAME}\n")
         print(_table(target / GRADEBOOK_NAME))
         print(f"\nper-student feedback: {target}/<submission>/{FEEDBACK_NAME} "

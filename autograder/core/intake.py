@@ -167,7 +167,7 @@ def read_code_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES, memory: int
 
     Raises :class:`NotebookError` for anything that is the submission's problem (not a regular file,
     too big, not a notebook, too costly to read); an error of the analysis itself is the grader's
-    (:class:`~autograder.results.GraderError`).
+    (:class:`~autograder.core.results.GraderError`).
     """
     data = _in_child(path, cap, "cells", memory)
     cells = []
@@ -189,11 +189,11 @@ def read_cells(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES, memory: int = PA
 
 
 def _in_child(path: str | Path, cap: int, mode: str, memory: int) -> dict[str, Any]:
-    from autograder.results import GraderError
+    from autograder.core.results import GraderError
 
     fd = open_regular(path, cap)
     try:
-        done = subprocess.run([sys.executable, "-m", "autograder.intake", mode, str(cap), str(memory)], stdin=fd,
+        done = subprocess.run([sys.executable, "-m", "autograder.core.intake", mode, str(cap), str(memory)], stdin=fd,
                               capture_output=True, timeout=PARSE_WALL_SECONDS, cwd="/")
     except subprocess.TimeoutExpired:
         raise NotebookError(f"reading the notebook took over {PARSE_WALL_SECONDS:.0f} s; it was not graded") from None
@@ -357,5 +357,5 @@ def _child_main(mode: str, cap: int, memory: int) -> None:
     sys.stdout.buffer.write(encoded)
 
 
-if __name__ == "__main__":  # python -m autograder.intake MODE CAP MEMORY < notebook
+if __name__ == "__main__":  # python -m autograder.core.intake MODE CAP MEMORY < notebook
     _child_main(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))

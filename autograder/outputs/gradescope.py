@@ -15,7 +15,62 @@ import sys
 import zipfile
 from pathlib import Path
 
-from autograder import course
+from typing import Any
+
+from autograder.core import course
+from autograder.core.results import GradeResult, StubResult
+from autograder.outputs.text import MESSAGE_CHARS, NOTE_CHARS, cap, points, quoted_lines
+
+
+GRADESCOPE_NAME = "results.json"
+"""Gradescope's result file; the batch writes one per submission too."""
+
+
+def _stub_output(stub: StubResult) -> str:
+    lines = []
+    for test in stub.tests:
+        mark = "✓" if test.passed else "✗"
+        lines.append(f"{mark} {test.name} ({points(test.points if test.passed else 0)}/{points(test.points)})")
+        if not test.passed:
+            lines += quoted_lines(cap(test.message, MESSAGE_CHARS))
+            if test.hint:
+                lines.append(f"    hint: {test.hint}")
+    return "\n".join(lines)
+
+
+def gradescope_results(result: GradeResult) -> dict[str, Any]:
+    """Gradescope's ``results.json``: one test entry per stub, with each check listed in its output.
+
+    Every output is plain text (``output_format`` and the tests' formats say so: Gradescope renders
+    nothing in it as Markdown or HTML), and a student's text is quoted line by line and cut.
+    """
+    tests = []
+    for number, stub in enumerate(result.stubs, start=1):
+        tests.append({
+            "name": stub.name, "number": str(number), "score": stub.score, "max_score": stub.max_score,
+            "status": "passed" if stub.tests and stub.score == stub.max_score else "failed",
+            "output": _stub_output(stub), "output_format": "text", "visibility": "visible",
+        })
+    return {
+        "score": result.score, "execution_time": round(result.seconds, 2), "output": _overall_output(result),
+        "output_format": "text", "test_output_format": "text", "test_name_format": "text",
+        "visibility": "visible", "stdout_visibility": "hidden", "tests": tests,
+    }
+
+
+def _overall_output(result: GradeResult) -> str:
+    parts = []
+    if result.error:
+        parts.append("This submission could not be graded automatically:")
+        parts += quoted_lines(cap(result.error, MESSAGE_CHARS))
+    for note in result.notes:
+        parts.append("Note:")
+        parts += quoted_lines(cap(note, NOTE_CHARS))
+    if result.manual:
+        total = sum(p for _, p in result.manual)
+        parts.append(f"Written answers graded by hand later ({points(total)} points): "
+                     + ", ".join(f"{gid} ({points(p)})" for gid, p in result.manual))
+    return "\n".join(parts)
 
 SETUP_SH = """\
 #!/usr/bin/env bash
@@ -38,7 +93,7 @@ RUN_AUTOGRADER = """\
 # Grade the submission of one student into /autograder/results/results.json.
 cd "${{GRADESCOPE_ROOT:-/autograder}}/source"
 export PYTHONPATH="$PWD" RLCOURSE_REPO="$PWD"
-exec .venv/bin/python -m autograder.gradescope {assignment}
+exec .venv/bin/python -m autograder.outputs.gradescope {assignment}
 """
 
 
@@ -62,6 +117,8 @@ def build_bundle(assignment: str, out: Path | None = None) -> Path:
         if "suites" not in path.relative_to(repo / "autograder").parts and "__pycache__" not in path.parts:
             members.append((path, path.relative_to(repo).as_posix()))
     add_tree(course.suite_dir(assignment), f"autograder/suites/{assignment}")
+    if course.common_helpers().is_file():
+        members.append((course.common_helpers(), "autograder/suites/sandbox_common.py"))
     add_tree(course.solution_notebook(assignment).parent, f"solutions/{assignment}")
     add_tree(course.release_notebook(assignment).parent, f"assignments/{assignment}")
     if (repo / "datasets").is_dir():
@@ -83,9 +140,9 @@ def run(assignment: str, root: Path) -> int:
     Gradescope then shows "The autograder failed to execute correctly" (and the student may
     resubmit), never a score of 0 for a fault that is not theirs.
     """
-    from autograder.batch import grade_upload
-    from autograder.report import gradescope_results
-    from autograder.results import GraderError
+    from autograder.core.batch import grade_upload
+    from autograder.outputs.gradescope import gradescope_results
+    from autograder.core.results import GraderError
 
     results = root / "results" / "results.json"
     results.parent.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,7 @@ import os
 from pathlib import Path
 from typing import Iterable
 
-INSTALLED = Path(__file__).resolve().parents[1]
+INSTALLED = Path(__file__).resolve().parents[2]
 """The repository this package runs from."""
 REPO = Path(os.environ.get("RLCOURSE_REPO", INSTALLED))
 """The course being graded: this repository, or another laid out the same way (tests use a small one)."""
@@ -28,6 +28,12 @@ def suite_dir(assignment: str) -> Path:
     return REPO / "autograder" / "suites" / assignment
 
 
+def common_helpers() -> Path:
+    """``autograder/suites/sandbox_common.py``: helpers every suite may call (``student.helpers.<name>``), run in
+    the sandbox before the suite's own ``sandbox_helpers.py``, into the same module."""
+    return REPO / "autograder" / "suites" / "sandbox_common.py"
+
+
 def samples_dir(assignment: str) -> Path:
     return REPO / "autograder" / "samples" / assignment
 
@@ -41,7 +47,7 @@ def check_assignment(assignment: str) -> None:
 
 def stub_names(assignment: str) -> list[str]:
     """The graded stubs of an assignment, in notebook order (from its student notebook)."""
-    from autograder.notebook import read_notebook, release_plan
+    from autograder.core.notebook import read_notebook, release_plan
 
     return [c.label for c in release_plan(read_notebook(release_notebook(assignment))) if c.kind == "stub"]
 
@@ -118,6 +124,8 @@ def suite_version(assignment: str) -> str:
     files = [(f"suite/{p.relative_to(suite).as_posix()}", p) for p in sorted(suite.rglob("*"))
              if p.is_file() and "__pycache__" not in p.parts and not p.name.endswith(".pyc")]
     files += [("solution", solution_notebook(assignment)), ("release", release_notebook(assignment))]
+    if common_helpers().is_file():
+        files.append(("common helpers", common_helpers()))
     for name, path in files:
         data = path.read_bytes()
         digest.update(f"{name}\0{len(data)}\0".encode())

@@ -38,8 +38,8 @@ from typing import Iterator
 
 import nbformat
 
-from autograder import course
-from autograder.notebook import read_notebook
+from autograder.core import course
+from autograder.core.notebook import read_notebook
 
 MARKERS = ("### BEGIN SOLUTION", "### END SOLUTION")
 EQUIVALENT_FILE = "equivalent_mutants.json"
@@ -331,7 +331,7 @@ def stub_tests(assignment: str) -> dict[str, list[str]]:
 
 def _stub_grader(assignment: str):
     """A Grader whose suite runs can be narrowed to some tests (``only``), so a mutant pays only for its stub's."""
-    from autograder.grader import Grader
+    from autograder.core.grader import Grader
 
     class StubGrader(Grader):
         only: list[str] = []
@@ -352,7 +352,7 @@ def equivalent_mutants(assignment: str) -> dict[str, dict[str, str]]:
 def run_mutants(assignment: str, stubs: list[str] | None = None, max_per_stub: int | None = None,
                 seed: int = 0, out: Path | None = None, log=print) -> dict[str, list[MutantOutcome]]:
     """Grade every mutant (or a seeded sample of ``max_per_stub`` per stub) and write the report."""
-    from autograder.samples import _with_stubs, solution_sources
+    from autograder.authoring.samples import _with_stubs, solution_sources
 
     course.check_assignment(assignment)
     out = out or course.REPO / "build" / "mutants" / assignment

@@ -3,7 +3,7 @@ the matching of a submission's cells to stubs.
 
 A submission may be anything a student's upload can be: not JSON, an old
 nbformat, empty, huge, not UTF-8, with cells reordered or deleted and metadata
-stripped; :mod:`autograder.intake` reads it safely and turns each of those into
+stripped; :mod:`autograder.core.intake` reads it safely and turns each of those into
 a clear message. :func:`find_stubs` matches cells by nbgrader ``grade_id`` first
 and by the name of the function or class a cell defines as a fallback, so lost
 metadata costs nothing when the code is there.
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import nbformat
 
-from autograder.intake import (MAX_NOTEBOOK_BYTES, CodeCell, NotebookError, SubmittedNotebook, defined_names,
+from autograder.core.intake import (MAX_NOTEBOOK_BYTES, CodeCell, NotebookError, SubmittedNotebook, defined_names,
                                read_cells)
 
 __all__ = ["MAX_NOTEBOOK_BYTES", "NotebookError", "StubMatch", "defined_names", "find_stubs", "imported_modules",
@@ -29,7 +29,7 @@ class StubMatch:
     source: str
     how: str  # "grade_id" or "name"
     problem: str = ""
-    """Why the matched cell cannot be run (see :class:`autograder.intake.CodeCell`), or empty."""
+    """Why the matched cell cannot be run (see :class:`autograder.core.intake.CodeCell`), or empty."""
 
 
 def _nbgrader(cell) -> dict:
@@ -50,10 +50,10 @@ def read_notebook(path: str | Path) -> nbformat.NotebookNode:
 def read_submission(path: str | Path) -> tuple[nbformat.NotebookNode, list[str]]:
     """A submitted notebook, for the outputs that show it (the nbgrader gradebook); with notes.
 
-    Read as :func:`autograder.intake.read_cells` reads it (no link followed, within the size cap,
+    Read as :func:`autograder.core.intake.read_cells` reads it (no link followed, within the size cap,
     parsed in a child process within its budget): every cell's type, source, tags, nbgrader metadata
     and Markdown attachments, and no outputs. Raises :class:`NotebookError` with the reason.
-    Grading itself needs only the code cells: :func:`autograder.intake.read_code_cells`.
+    Grading itself needs only the code cells: :func:`autograder.core.intake.read_code_cells`.
     """
     cells, notes = read_cells(path)
     made = {"code": nbformat.v4.new_code_cell, "markdown": nbformat.v4.new_markdown_cell,
@@ -78,7 +78,7 @@ def find_stubs(nb: SubmittedNotebook | nbformat.NotebookNode, expected: list[str
     """Match each expected stub to a code cell: by ``grade_id``, else by the name the cell defines.
 
     When several cells match, the last one wins, as it would when the notebook runs top to bottom.
-    ``nb`` is what :func:`autograder.intake.read_code_cells` returns (grading), or a notebook from
+    ``nb`` is what :func:`autograder.core.intake.read_code_cells` returns (grading), or a notebook from
     :func:`read_submission`.
     """
     by_id: dict[str, StubMatch] = {}
