@@ -7,6 +7,12 @@ episodes themselves are :class:`rlcourse.multimodal.ObstacleTracks` seeded
 
     python datasets/scripts/make_multimodal_demos.py --episodes 100 --seed 0
 
+``--task sharp|medium|gentle`` records the same kind of file for one of the versions of the track where the
+demonstrators split at the first step (``rlcourse.multimodal.COMMIT_TASKS``), as
+``datasets/hw1b/commit_<task>.npz``:
+
+    python datasets/scripts/make_multimodal_demos.py --task sharp --episodes 200 --seed 0
+
 Arrays: ``obs`` ``(N, 5)``, ``actions`` ``(N, 1)``, ``rewards`` ``(N,)`` (float32), stored episode after
 episode; ``lengths`` ``(n_episodes,)`` int64 with ``N = lengths.sum()``; ``terminated`` ``(n_episodes,)``
 bool; ``sides`` ``(n_episodes,)`` int64, +1 for the left (inside) and -1 for the right.
@@ -20,10 +26,11 @@ import numpy as np
 from rlcourse import data, multimodal
 
 
-def record_episodes(sides: np.ndarray, seed: int) -> dict[str, np.ndarray]:
-    """The expert's episodes, one per entry of ``sides``, stored flat."""
-    env = multimodal.ObstacleTracks(len(sides), seed)
-    expert = multimodal.ObstacleExpert(sides)
+def record_episodes(sides: np.ndarray, seed: int, task: multimodal.ObstacleTask = multimodal.CLOSED_LOOP
+                    ) -> dict[str, np.ndarray]:
+    """The expert's episodes on ``task``, one per entry of ``sides``, stored flat."""
+    env = multimodal.ObstacleTracks(len(sides), seed, task)
+    expert = multimodal.ObstacleExpert(sides, task=task)
     obs, steps = env.reset(), []
     running = np.ones(len(sides), dtype=bool)
     while running.any():
@@ -42,15 +49,18 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--task", choices=sorted(multimodal.COMMIT_TASKS), default=None,
+                        help="a version where the demonstrators split at the first step (default: the main task)")
     args = parser.parse_args(argv)
+    task = multimodal.COMMIT_TASKS[args.task] if args.task else multimodal.CLOSED_LOOP
     sides = np.random.default_rng(args.seed).choice([multimodal.LEFT, multimodal.RIGHT], size=args.episodes)
-    arrays = record_episodes(sides, args.seed)
-    target = data.DATASETS / "hw1b" / "demos.npz"
+    arrays = record_episodes(sides, args.seed, task)
+    target = data.DATASETS / "hw1b" / (f"commit_{args.task}.npz" if args.task else "demos.npz")
     target.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(target, **arrays)
     info = {"episodes": args.episodes, "steps": int(arrays["lengths"].sum()),
             "left_fraction": round(float(np.mean(sides == multimodal.LEFT)), 3),
-            "success": round(float(np.mean(arrays["lengths"] == multimodal.HORIZON)), 3),
+            "success": round(float(np.mean(arrays["lengths"] == task.horizon)), 3),
             "terminated": int(arrays["terminated"].sum())}
     data.record(target, __file__, argv, seed=args.seed, info=info)
     print(f"{target.relative_to(data.DATASETS.parent)}: {args.episodes} episodes, {info['steps']} steps, "
