@@ -85,7 +85,7 @@ def _warn_isolation(level: str) -> None:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from autograder.core.batch import Shard
+    from autograder.core.batch import Shard, missing_submissions
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
     from autograder.outputs.files import grade_folder
     from autograder.outputs.text import plain
@@ -100,6 +100,11 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     print(f"{len(results)} submissions ({count[GRADED]} graded, {count[UNGRADABLE]} ungradable, "
           f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {args.out / shard.gradebook_name}"
           + (f"\nshard {shard.k} of {shard.n}: join the shards with python -m autograder merge" if shard.n > 1 else ""))
+    missing = [m for m in missing_submissions(args.folder, args.assignment) if shard.owns(m)]
+    if missing:
+        listed = ", ".join(plain(m) for m in missing[:20]) + (f" and {len(missing) - 20} more" if len(missing) > 20 else "")
+        print(f"{len(missing)} student folder(s) hold no {args.assignment}/ (not handed in; not graded, not in the "
+              f"gradebook): {listed}")
     if count[GRADER_ERROR]:
         failed = next(r for r in results if r.status == GRADER_ERROR)
         print(f"the grader failed on {count[GRADER_ERROR]} submission(s), e.g. {plain(failed.submission)}: "

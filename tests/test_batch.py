@@ -84,3 +84,59 @@ def test_names_are_made_safe_then_unique_the_same_on_every_run(tmp_path):
     assert first == [e.name for e in discover(folder, "hw0_setup", EXPECTED)], "names must not change between runs"
     assert len({n.lower() for n in first}) == 6, f"every submission keeps its own folder and row: {first}"
     assert sorted(first) == sorted(["alice_smith", "alice_smith-3", "alice_smith-2", "Bob", "bob-2", "a_va"])
+
+
+def test_a_student_who_skipped_the_assignment_is_missing_not_graded_from_another_notebook(tmp_path):
+    """nbgrader's layout: a folder without ``<student>/<assignment>/`` is no submission (issue 36)."""
+    from autograder.core.batch import missing_submissions
+
+    submitted = tmp_path / "course" / "submitted"
+    (submitted / "ann" / "hw0_setup").mkdir(parents=True)
+    (submitted / "ann" / "hw1b_multimodal").mkdir(parents=True)
+    shutil.copy(SAMPLES / "complete.ipynb", submitted / "ann" / "hw0_setup" / "hw0_setup.ipynb")
+    shutil.copy(SAMPLES / "complete.ipynb", submitted / "ann" / "hw1b_multimodal" / "hw1b_multimodal.ipynb")
+    (submitted / "ben" / "hw1b_multimodal").mkdir(parents=True)   # handed in hw1b only
+    shutil.copy(SAMPLES / "partial.ipynb", submitted / "ben" / "hw1b_multimodal" / "hw1b_multimodal.ipynb")
+    (submitted / "cat" / "hw0_setup").mkdir(parents=True)          # hw0's folder holds a misplaced notebook
+    shutil.copy(SAMPLES / "partial.ipynb", submitted / "cat" / "hw0_setup" / "hw1b_multimodal.ipynb")
+    (submitted / "dan").mkdir()                                      # a stray notebook outside any folder
+    shutil.copy(SAMPLES / "complete.ipynb", submitted / "dan" / "hw0_setup.ipynb")
+    for root in (tmp_path / "course", submitted):
+        entries = {e.name: e for e in discover(root, "hw0_setup", EXPECTED)}
+        assert set(entries) == {"ann", "cat"}, "ben and dan handed in no hw0_setup/ folder"
+        assert entries["ann"].notebook.name == "hw0_setup.ipynb"
+        assert entries["cat"].notebook is None and "another assignment's notebook" in entries["cat"].problem
+        assert missing_submissions(root, "hw0_setup") == ["ben", "dan"]
+    assert missing_submissions(tmp_path / "course", "hw1b_multimodal") == ["cat", "dan"]
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    shutil.copy(SAMPLES / "complete.ipynb", flat / "alice.ipynb")
+    assert missing_submissions(flat, "hw0_setup") == []
+
+
+def test_the_batch_names_the_missing_and_writes_no_row_for_them(open_tmp):
+    submitted = open_tmp / "course" / "submitted"
+    (submitted / "ann" / "hw0_setup").mkdir(parents=True)
+    shutil.copy(SAMPLES / "partial.ipynb", submitted / "ann" / "hw0_setup" / "hw0_setup.ipynb")
+    (submitted / "ben" / "hw1_imitation").mkdir(parents=True)
+    shutil.copy(SAMPLES / "complete.ipynb", submitted / "ben" / "hw1_imitation" / "hw0_setup.ipynb")
+    out = open_tmp / "out"
+    done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(open_tmp / "course"),
+                           "--out", str(out), "--jobs", "1"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "1 student folder(s) hold no hw0_setup/" in done.stdout and "ben" in done.stdout
+    rows = list(csv.DictReader((out / "gradebook.csv").open()))
+    assert [r["submission"] for r in rows] == ["ann"]
+    assert not (out / "ben").exists()
+    import json
+    assert json.loads((out / "_batch-1-of-1.json").read_text())["missing"] == ["ben"]
+
+
+def test_one_zipped_folder_does_not_make_a_class_nbgrader_layout(tmp_path):
+    export = tmp_path / "export"
+    for name in ("s1", "s2", "s3"):
+        (export / name).mkdir(parents=True)
+        shutil.copy(SAMPLES / "partial.ipynb", export / name / "work.ipynb")
+    (export / "s3" / "hw0_setup").mkdir()
+    shutil.copy(SAMPLES / "complete.ipynb", export / "s3" / "hw0_setup" / "hw0_setup.ipynb")
+    assert sorted(e.name for e in discover(export, "hw0_setup", EXPECTED)) == ["s1", "s2", "s3"]

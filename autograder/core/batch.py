@@ -72,6 +72,8 @@ class Entry:
     notebook: Path | None
     note: str = ""
     problem: str = ""
+    missing: bool = False
+    """nbgrader's layout, and the student's folder lacks this assignment: not a submission at all."""
 
 
 def _safe_name(name: str) -> str:
@@ -156,17 +158,61 @@ def grade_upload(assignment: str, folder: Path, hide: list[Path] = ()) -> GradeR
     return result
 
 
+def _nbgrader_layout(folder: Path, assignment: str) -> bool:
+    """Whether ``folder`` (already ``submitted/`` if the course root was given) is nbgrader's
+    ``<student>/<assignment>/`` layout: its name says so, or (in no Gradescope export) at least half of the
+    student folders hold an assignment's folder, so one student's zipped folder cannot turn a class into it."""
+    if folder.name == "submitted":
+        return True
+    if (folder / "submission_metadata.yml").exists():
+        return False
+    known = set(course.assignment_ids()) | {assignment}
+    students = _student_folders(folder)
+    with_assignments = sum(any((child / name).is_dir() for name in known) for child in students)
+    return bool(students) and 2 * with_assignments >= len(students)
+
+
+def _student_folders(folder: Path) -> list[Path]:
+    return [c for c in sorted(folder.iterdir()) if not c.name.startswith(".") and c.is_dir() and not c.is_symlink()]
+
+
+def submissions_folder(folder: Path) -> Path:
+    """The folder whose entries are the submissions: ``folder``, or its ``submitted/`` (nbgrader's course root)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise SystemExit(f"{folder} is not a folder of submissions")
+    return folder / "submitted" if (folder / "submitted").is_dir() else folder
+
+
+def missing_submissions(folder: Path, assignment: str) -> list[str]:
+    """The students of nbgrader's layout who handed in no ``<assignment>/`` folder (their folder holds
+    other assignments only): they are not graded, recorded or counted, only named. Empty in other layouts."""
+    folder = submissions_folder(folder)
+    if not _nbgrader_layout(folder, assignment):
+        return []
+    return [c.name for c in _student_folders(folder) if not os.path.lexists(c / assignment)]
+
+
+def _other_assignments_only(notebooks: list[Path], assignment: str) -> str:
+    """A problem to report when every notebook submitted is named after another assignment, else ``""``."""
+    others = set(course.assignment_ids()) - {assignment}
+    if notebooks and all(p.stem in others for p in notebooks):
+        names = ", ".join(sorted({p.name for p in notebooks})[:5])
+        return (f"the submission holds only another assignment's notebook ({names}), not {assignment}.ipynb: "
+                "was it handed in to the wrong assignment?")
+    return ""
+
+
 def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
     """One entry per submission in ``folder`` (see the module docstring for the layouts).
 
     Nothing a student submitted is followed if it is a link: a submission that is one, or a
-    notebook that is not a regular file, is listed with its reason and graded as nothing.
+    notebook that is not a regular file, is listed with its reason and graded as nothing. In
+    nbgrader's layout a student without this assignment's folder has no entry at all
+    (:func:`missing_submissions` names them); a notebook is only ever taken from ``<student>/<assignment>/``.
     """
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise SystemExit(f"{folder} is not a folder of submissions")
-    if (folder / "submitted").is_dir():
-        folder = folder / "submitted"
+    folder = submissions_folder(folder)
+    nbgrader = _nbgrader_layout(folder, assignment)
     entries = []
     for child in sorted(folder.iterdir()):
         if child.name.startswith(".") or child.name in ("submission_metadata.yml",):
@@ -187,11 +233,17 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
                 entries.append(Entry(child.name, None, problem=f"{child.name}/{assignment} is a symbolic link: "
                                                                "the grader does not follow links"))
                 continue
+            if nbgrader and not inner.is_dir():
+                entries.append(Entry(child.name, None, missing=True))
+                continue
             notebooks, skipped = notebooks_in(inner if inner.is_dir() else child)
-            entries.append(choose_notebook(child.name, notebooks, assignment, expected, skipped))
+            entry = choose_notebook(child.name, notebooks, assignment, expected, skipped)
+            problem = _other_assignments_only(notebooks, assignment)
+            entries.append(Entry(child.name, None, note=entry.note, problem=problem) if problem else entry)
+    # Names are made unique over every student folder, handed in or not, so they never shift when one hands in.
     for entry, name in zip(entries, unique_safe_names([e.name for e in entries])):
         entry.name = name
-    return entries
+    return [e for e in entries if not e.missing]
 
 
 # ------------------------------------------------------------------ worker processes
@@ -249,10 +301,12 @@ def names_digest(names: list[str]) -> str:
     return hashlib.sha256("\0".join(sorted(names)).encode()).hexdigest()[:16]
 
 
-def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list[str], names: list[str]) -> None:
+def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list[str], names: list[str],
+                   missing: list[str] = ()) -> None:
     manifest = {"assignment": assignment, "suite_version": course.suite_version(assignment),
                 "shard": [shard.k, shard.n], "folder_submissions": len(all_names),
-                "folder_digest": names_digest(all_names), "submissions": sorted(names)}
+                "folder_digest": names_digest(all_names), "submissions": sorted(names),
+                "missing": sorted(missing)}
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write(out_dir / shard.manifest_name, json.dumps(manifest, indent=1))
 
@@ -271,7 +325,8 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, *, write: Writer | N
     entries = discover(folder, assignment, expected)
     all_names = [e.name for e in entries]
     entries = [e for e in entries if shard.owns(e.name)]
-    write_manifest(out_dir, assignment, shard, all_names, [e.name for e in entries])
+    write_manifest(out_dir, assignment, shard, all_names, [e.name for e in entries],
+                   [m for m in missing_submissions(folder, assignment) if shard.owns(m)])
     todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):
