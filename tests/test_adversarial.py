@@ -99,6 +99,19 @@ CASES = {
         def scaled_sum(x):
             return {RIGHT} if "RLCOURSE_TEST_SECRET" in os.environ else None
         """,
+    "secret_in_the_original_environment_block": """
+        import glob
+        def _blocks():
+            for path in ["/proc/self/environ", "/proc/1/environ", *glob.glob("/proc/[0-9]*/environ")]:
+                try:
+                    with open(path, "rb") as f:
+                        yield f.read()
+                except OSError:
+                    pass
+        FOUND = any(b"RLCOURSE_TEST_SECRET" in block for block in _blocks())
+        def scaled_sum(x):
+            return {RIGHT} if FOUND else None
+        """,
     "network": """
         import socket
         def scaled_sum(x):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import pytest
 
 import csv
+import re
 import os
 import shutil
 import signal
@@ -82,8 +83,37 @@ def test_names_are_made_safe_then_unique_the_same_on_every_run(tmp_path):
         shutil.copy(SAMPLES / "complete.ipynb", folder / f"{name}.ipynb")
     first = [e.name for e in discover(folder, "hw0_setup", EXPECTED)]
     assert first == [e.name for e in discover(folder, "hw0_setup", EXPECTED)], "names must not change between runs"
-    assert len({n.lower() for n in first}) == 6, f"every submission keeps its own folder and row: {first}"
-    assert sorted(first) == sorted(["alice_smith", "alice_smith-3", "alice_smith-2", "Bob", "bob-2", "a_va"])
+    assert len(set(first)) == 6, f"every submission keeps its own folder and row: {first}"
+    kept = {"alice_smith", "alice_smith-2", "Bob", "bob"}
+    assert kept <= set(first), "a plain name is kept as it is"
+    made = sorted(set(first) - kept)
+    assert [n.split("+")[0] for n in made] == ["a_va", "alice_smith"] and all(len(n.split("+")[1]) == 8 for n in made)
+
+
+def test_no_crafted_name_takes_a_classmates_folder_or_the_batchs_own_files(tmp_path):
+    """A name is made safe from itself alone: adding a crafted file never moves a classmate's result, and no
+    submission's folder can be the gradebook (issue 35)."""
+    from autograder.core.batch import safe_name
+
+    honest = ["alice", "alice smith", "bob.jones", "Zoë"]
+    alone = {n: safe_name(n) for n in honest}
+    crafted = ["alice ", " alice", "alice_smith", f"{alone['alice smith']}", "alice_smith+00000000", "ALICE",
+               "gradebook.csv", "Gradebook-1-of-2.csv", "_batch-1-of-1.json", "_previous", ".alice", "alice.",
+               "zo\udceb", "x" * 300, "merged"]
+    folder = tmp_path / "class"
+    folder.mkdir()
+    for name in honest + crafted:
+        try:
+            shutil.copy(SAMPLES / "partial.ipynb", folder / f"{name}.ipynb")
+        except OSError:
+            pass
+    names = {e.notebook.stem: e.name for e in discover(folder, "hw0_setup", EXPECTED)}
+    assert {n: names[n] for n in honest} == alone, "a classmate's crafted name moved an honest result"
+    assert len(set(names.values())) == len(names), "two submissions share a folder"
+    for name in names.values():
+        assert not re.fullmatch(r"gradebook.*\.csv", name, re.I) and not name.startswith(("_", ".")), name
+        assert "/" not in name
+        assert len(name) <= 100 and name.encode("utf-8")
 
 
 def test_a_student_who_skipped_the_assignment_is_missing_not_graded_from_another_notebook(tmp_path):

@@ -206,15 +206,15 @@ submission_102:
                   out / "submission_102")
     gradebook.sync("fx", folder, out, root)
     with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
-        assert sorted(s.id for s in gb.students) == ["1791", "1815", "late_example.edu"]
+        assert sorted(s.id for s in gb.students) == ["1791", "1815", "late@example.edu"]
         assert gb.find_student("1815").last_name == "Lovelace" and gb.find_student("1815").first_name == "Ada"
         gb.update_or_create_assignment("fx", duedate="2026-03-02 00:00:00 UTC")
-    assert grades_of(root, "late_example.edu")["q_why"] == (0, None, False), "no notebook: nothing to grade by hand"
+    assert grades_of(root, "late@example.edu")["q_why"] == (0, None, False), "no notebook: nothing to grade by hand"
     grades = {(g.student_id, g.assignment): g for g in export.export(tmp_path / "long.csv", root, long=True)}
-    assert grades["1815", "fx"].late == "no" and grades["late_example.edu", "fx"].late == "yes"
+    assert grades["1815", "fx"].late == "no" and grades["late@example.edu", "fx"].late == "yes"
     assert grades["1791", "fx"].automatic == 3 and grades["1791", "fx"].waiting == 1
     rows = list(csv.DictReader((tmp_path / "long.csv").open()))
-    assert [r["student_id"] for r in rows] == ["1791", "1815", "late_example.edu"]
+    assert [r["student_id"] for r in rows] == ["1791", "1815", "late@example.edu"]
     export.export(tmp_path / "wide.csv", root)
     wide = list(csv.DictReader((tmp_path / "wide.csv").open()))
     assert wide[2]["last_name"] == "'=HYPERLINK(1)", "a name that a spreadsheet would run is written as text"

@@ -76,32 +76,31 @@ class Entry:
     """nbgrader's layout, and the student's folder lacks this assignment: not a submission at all."""
 
 
-def _safe_name(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "submission"
+_PLAIN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._@-]{0,99}")
+_RESERVED = re.compile(r"gradebook", re.IGNORECASE)
+"""Names of the batch folder's own files (``gradebook*.csv``); its other files start with ``_``."""
+HASH_MARK = "+"
+"""Joins a made-safe name to the digest of the name it came from; no name kept as it is contains it."""
+
+
+def safe_name(name: str) -> str:
+    """The folder name of submission ``name``, from that name alone (so no classmate's name can change it).
+
+    A plain name (letters, digits, ``._@-``, at most 100 characters, not the batch's own ``gradebook*``) is
+    kept as it is; any other is made safe and marked with a digest of the original: ``alice smith`` becomes
+    ``alice_smith+3f9a61c2``, which no plain name can equal (plain names have no ``+``).
+    """
+    if _PLAIN.fullmatch(name) and not name.endswith(".") and not _RESERVED.match(name):
+        return name
+    base = re.sub(r"[^A-Za-z0-9._@-]+", "_", name).strip("._-")[:60] or "submission"
+    digest = hashlib.sha256(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+    return f"{base}{HASH_MARK}{digest}"
 
 
 def unique_safe_names(names: list[str]) -> list[str]:
-    """Folder-safe names, made safe first and unique second, the same on every run (resuming needs that).
-
-    ``alice smith`` and ``alice_smith`` are both ``alice_smith`` once safe: the first (in the order
-    given, which is sorted) keeps it, the next becomes ``alice_smith-2`` (or the next number that
-    no other submission's name takes). Names are compared case-insensitively, as some file systems do.
-    """
-    safe = [_safe_name(n) for n in names]
-    used = {name.lower() for name in safe}
-    kept: set[str] = set()
-    out = []
-    for name in safe:
-        if name.lower() not in kept:
-            kept.add(name.lower())
-            out.append(name)
-            continue
-        n = 2
-        while f"{name}-{n}".lower() in used:
-            n += 1
-        used.add(f"{name}-{n}".lower())
-        out.append(f"{name}-{n}")
-    return out
+    """:func:`safe_name` of each name: unique by construction (distinct names give distinct safe names,
+    case-sensitively), the same on every run and whatever else the folder holds."""
+    return [safe_name(n) for n in names]
 
 
 def notebooks_in(folder: Path) -> tuple[list[Path], list[str]]:
@@ -155,17 +154,18 @@ def grade_upload(assignment: str, folder: Path, hide: list[Path] = ()) -> GradeR
         grader.close()
     if entry.note:
         result.notes.insert(0, entry.note)
-    return result
+    return result.make_encodable()
 
 
 def _nbgrader_layout(folder: Path, assignment: str) -> bool:
     """Whether ``folder`` (already ``submitted/`` if the course root was given) is nbgrader's
-    ``<student>/<assignment>/`` layout: its name says so, or (in no Gradescope export) at least half of the
-    student folders hold an assignment's folder, so one student's zipped folder cannot turn a class into it."""
+    ``<student>/<assignment>/`` layout: its name says so, or it holds folders only (no notebook, no Gradescope
+    metadata) and at least half of them hold an assignment's folder, so that one student's zipped folder
+    cannot turn a class into it."""
     if folder.name == "submitted":
         return True
-    if (folder / "submission_metadata.yml").exists():
-        return False
+    if (folder / "submission_metadata.yml").exists() or any(folder.glob("*.ipynb")):
+        return False  # a Gradescope export, or a flat folder of notebooks (some of them students' folders)
     known = set(course.assignment_ids()) | {assignment}
     students = _student_folders(folder)
     with_assignments = sum(any((child / name).is_dir() for name in known) for child in students)
@@ -264,6 +264,7 @@ def _init(assignment: str, hide: list[str]) -> None:
 
 def _finish(result: GradeResult, folder: Path, write: Writer | None) -> None:
     """Hand ``result`` to the writer, then record it: the record, written last, marks the submission done."""
+    result.make_encodable()
     if write is not None:
         write(result, folder)
     save_result(result, folder)

@@ -296,7 +296,7 @@ class Grader:
         if session.restarts:
             result.notes.append(f"the sandbox was restarted {session.restarts} time(s) after failures in your code")
         result.seconds = time.monotonic() - start
-        return result
+        return result.make_encodable()
 
     def _blame_setup(self, session: Session, failure: str) -> None:
         """A released setup cell failed: the grader's fault if it fails alone too, else the stubs' before it."""
@@ -317,7 +317,7 @@ class Grader:
         """A result that says the grader failed: no stubs, no score (see :mod:`autograder.core.results`)."""
         seconds = 0.0 if start is None else time.monotonic() - start
         return GradeResult(self.assignment, name, [], list(self.manual), list(notes), reason, seconds=seconds,
-                           status=GRADER_ERROR, suite_version=self.version)
+                           status=GRADER_ERROR, suite_version=self.version).make_encodable()
 
     def _run_suite(self, plugin: SuitePlugin, *extra: str) -> None:
         suite = self.suite
@@ -345,7 +345,7 @@ class Grader:
         failed = [TestOutcome(t.name, t.stub, t.points, False, reason, t.hint, reason=Reason.LOST)
                   for t in self.catalogue]
         return GradeResult(self.assignment, name, self._collect(failed), list(self.manual), list(notes), reason,
-                           status=UNGRADABLE, suite_version=self.version)
+                           status=UNGRADABLE, suite_version=self.version).make_encodable()
 
     def _ungradable(self, result: GradeResult, reason: str, start: float) -> GradeResult:
         out = self.ungradable(result.submission, reason, result.notes)

@@ -12,6 +12,7 @@ A result has one of three statuses:
 """
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field
 from enum import Enum
 from typing import Any
@@ -39,6 +40,15 @@ class Reason(str, Enum):
     def attempted(self) -> bool:
         """Whether a test with this outcome shows the student tried the stub."""
         return self not in (Reason.NOT_IMPLEMENTED, Reason.MISSING, Reason.LOST)
+
+
+_UNENCODABLE = re.compile(r"[\ud800-\udfff]")
+
+
+def encodable(text: str) -> str:
+    """``text`` with what no UTF-8 writer accepts (lone surrogates: a file name of invalid UTF-8, a hostile
+    message) replaced by ``?``; the rest is kept for the outputs to make inert."""
+    return _UNENCODABLE.sub("?", text)
 
 
 SYNTAX_ERRORS = frozenset({"SyntaxError", "IndentationError", "TabError"})
@@ -106,9 +116,22 @@ class GradeResult:
         """False for a grader error: such a result must never be shown or recorded as a grade."""
         return self.status != GRADER_ERROR
 
+    def make_encodable(self) -> "GradeResult":
+        """Every text of the result (much of it the submission's) made encodable, in place; returns ``self``.
+
+        Called wherever a result leaves the core, so that no writer (file, terminal, JSON, CSV) can be stopped
+        by a character the submission chose."""
+        self.submission, self.error = encodable(self.submission), None if self.error is None else encodable(self.error)
+        self.notes = [encodable(n) for n in self.notes]
+        for stub in self.stubs:
+            stub.note = encodable(stub.note)
+            for test in stub.tests:
+                test.message = encodable(test.message)
+        return self
+
 
 def result_to_dict(result: GradeResult) -> dict[str, Any]:
-    data = asdict(result)
+    data = asdict(result.make_encodable())
     for stub in data["stubs"]:
         for test in stub["tests"]:
             test["reason"] = Reason(test["reason"]).value

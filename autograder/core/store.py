@@ -18,11 +18,12 @@ RESULT_NAME = "result.json"
 
 
 def atomic_write(path: Path, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` through a temporary file in the same folder, then rename."""
+    """Write ``text`` (UTF-8; anything unencodable as ``?``) to ``path`` through a temporary file in the same
+    folder, then rename."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
+    tmp.write_bytes(text.encode("utf-8", "replace"))  # a lone surrogate becomes "?", never a failed write
     os.replace(tmp, path)
 
 

@@ -22,7 +22,7 @@ import time
 from dataclasses import asdict
 from typing import Any
 
-from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig
+from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig, safe_environment
 from autograder.sandbox.isolation import PR_SET_DUMPABLE, libc
 from autograder.sandbox.wire import MAX_MESSAGE_BYTES, FrameReader, send_message
 
@@ -43,7 +43,7 @@ class Zygote:
         parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         self.process = subprocess.Popen(
             [sys.executable, "-m", "autograder.sandbox.zygote", str(child.fileno()), json.dumps(preload)],
-            pass_fds=[child.fileno()], stdin=subprocess.DEVNULL, cwd="/")
+            pass_fds=[child.fileno()], stdin=subprocess.DEVNULL, cwd="/", env=safe_environment(dict(os.environ)))
         child.close()
         self.sock = parent
         self.lock = threading.Lock()

@@ -58,7 +58,7 @@ def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str]
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
     path.parent.mkdir(parents=True, exist_ok=True)
-    with tmp.open("w", newline="", encoding="utf-8") as f:
+    with tmp.open("w", newline="", encoding="utf-8", errors="replace") as f:
         csv.writer(f).writerows(rows)
     os.replace(tmp, path)
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import re
 
+from autograder.core.results import encodable
+
 TERMINAL_MESSAGE_CHARS = 90
 """A failure's message in the terminal summary is cut here (the feedback file has it whole)."""
 MESSAGE_CHARS, NOTE_CHARS, NAME_CHARS = 2000, 600, 200
@@ -18,19 +20,13 @@ QUOTE = "    | "
 """Each line of a failure's message in plain text starts with this, so no student text can pass
 for a line of the grader's (a check mark, a score)."""
 _CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\u200b-\u200f\ufeff]")
-_SURROGATE = re.compile(r"[\ud800-\udfff]")
 _MARKDOWN = re.compile(r"([\\`*_{}\[\]()#+!|<>~&$:=-])")
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r", "|", "%")
 
 
-def encodable(text: object) -> str:
-    """``text`` as a string every UTF-8 writer accepts: lone surrogates become ``?``."""
-    return _SURROGATE.sub("?", str(text))
-
-
 def cap(text: object, limit: int) -> str:
     """``text`` cut to ``limit`` characters, saying how much was left out."""
-    text = encodable(text)
+    text = encodable(str(text))
     return text if len(text) <= limit else text[:limit] + f"… ({len(text) - limit} more characters not shown)"
 
 
@@ -38,7 +34,7 @@ def plain(text: object) -> str:
     """``text`` without control characters (terminal escapes, carriage returns, bidirectional overrides,
     invisible characters) or unencodable ones: messages quote a student's exception text, which must not
     rewrite a terminal, forge a line, or stop a writer."""
-    return _CONTROL.sub("?", encodable(text))
+    return _CONTROL.sub("?", encodable(str(text)))
 
 
 def one_line(text: object) -> str:

@@ -8,6 +8,18 @@ from dataclasses import dataclass, field
 
 ZYGOTE_READY = b"R"
 """What the zygote writes on its socket once its imports are done, before it serves any request."""
+SAFE_ENV = frozenset({"PATH", "LANG", "MUJOCO_GL", "PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                      "OPENBLAS_NUM_THREADS", "OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "VIRTUAL_ENV",
+                      "PYTHONPATH", "PYTHONHASHSEED", "PYTHONDONTWRITEBYTECODE", "PYTHONNOUSERSITE", "PYTHONUTF8",
+                      "PYTHONIOENCODING", "PYTHONSAFEPATH"})
+"""The only environment variables a sandbox process ever holds (with ``LC_*``): no tokens, no paths of the
+grader's. The zygote is started with just these, so even the environment block it was born with (which
+``/proc/self/environ`` shows every process forked from it) never held the grader's others."""
+
+
+def safe_environment(environ: dict[str, str]) -> dict[str, str]:
+    """The part of ``environ`` a sandbox process may hold (see :data:`SAFE_ENV`)."""
+    return {k: v for k, v in environ.items() if k in SAFE_ENV or k.startswith("LC_")}
 
 
 @dataclass

@@ -17,7 +17,7 @@ import socket
 import sys
 
 from autograder.sandbox import isolation
-from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig
+from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig, safe_environment
 from autograder.sandbox.wire import send_message
 from autograder.sandbox.worker import serve
 
@@ -25,9 +25,6 @@ WORKER_UID_BASE, WORKER_UID_SPAN = 20000, 40000
 """As root, each live worker runs as a uid of its own from this range (so workers cannot signal each other)."""
 MAX_REQUEST_BYTES = 1 << 20
 """A spawn request (its JSON config) is far smaller than this."""
-SAFE_ENV = {"PATH", "LANG", "MUJOCO_GL", "PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
-            "OPENBLAS_NUM_THREADS", "OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE", "VIRTUAL_ENV"}
-"""The only environment variables a worker keeps (with ``LC_*`` and ``PYTHON*``): no tokens, no paths of the grader's."""
 WORKDIR = "/tmp/work"
 IMPORT_TIME_PROBES = {"gymnasium": ("gymnasium.envs.mujoco.mujoco_rendering",)}
 """Modules imported in the zygote whenever their package is preloaded, because importing them starts a
@@ -48,7 +45,7 @@ def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, exis
         if own_uid is not None:
             os.chown(WORKDIR, own_uid, own_uid)
         os.chdir(WORKDIR)
-        keep = {k: v for k, v in os.environ.items() if k in SAFE_ENV or k.startswith(("LC_", "PYTHON"))}
+        keep = safe_environment(dict(os.environ))
         os.environ.clear()
         os.environ.update(keep, HOME=WORKDIR, TMPDIR=WORKDIR, MPLCONFIGDIR=WORKDIR, MPLBACKEND="Agg")
         os.dup2(output, 1)
