@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope formgrader mutants bench site figures clean
+.PHONY: setup demo test test-fast assignments student-release datasets-check gradescope formgrader mutants bench numbers site figures clean
 
 $(STAMP): pyproject.toml lectures/requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -66,6 +66,10 @@ mutants: setup
 ## Every benchmark; each prints the table the README shows.
 bench: setup
 	set -e; for script in bench/bench_*.py; do $(PY) $$script; done
+
+## The numbers pages (docs/numbers/), rewritten from bench/results/*.json; tests/test_numbers_pages.py checks them.
+numbers: setup
+	$(PY) bench/numbers_pages.py
 
 ## The lecture site, built from scratch, offline, failing on any warning or unparsable formula.
 site: setup
