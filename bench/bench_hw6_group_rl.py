@@ -8,7 +8,8 @@ sequences, on the gold reward (a program) and on the learned proxy; IPO, KTO and
     python bench/bench_hw6_group_rl.py --all-variants     # also Dr. GRPO, RLOO and PPO on the proxy
 
 Every number comes from the reference solutions: hw6's notebook (its setup and stub cells, executed here) for
-the critic-free runs, IPO, KTO and DPO, and hw5's notebook for PPO with its value head (``ppo_train``), all on
+the critic-free runs, IPO, KTO and DPO, and hw5's for PPO with its value head, passed to the given loops of
+``rlcourse.lm_training`` (``critic_free_train``, ``pairwise_train``, ``kto_train``, ``ppo_train``), all on
 the shipped SFT model and preference set, with hw6's full budgets. The reward model (refitted per seed) and DPO
 come from ``datasets/scripts/make_hw6_models.py``, whose seed-0 results the notebook loads ready-made
 (``datasets/hw6/``), so seed 0 here is the notebook's run. ``bench/results/hw6_group_rl.json`` holds,
@@ -59,6 +60,7 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
     import torch
 
     from rlcourse import group_rl as G
+    from rlcourse import lm_training as L
     from rlcourse import reviews as R
     from rlcourse.lm import generate, load_sft
 
@@ -74,7 +76,9 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
     t0 = time.perf_counter()
     rm = fit_reward_model(sft, chosen[tr], rejected[tr], BUDGET["RM_STEPS"], seed=seed)
     rm_s = time.perf_counter() - t0
-    gold_fn, proxy_fn = hw6["gold_fn"], (lambda s: G.proxy_score(rm, s))
+    gold_fn, proxy_fn = L.gold_fn, (lambda s: G.proxy_score(rm, s))
+    variants = {"GRPO": (hw6["group_advantages"], True), "RLOO": (hw6["rloo_advantages"], True),
+                "Dr. GRPO": (lambda r: hw6["group_advantages"](r, scale=False), False)}
     done = json.loads(seed_file(seed).read_text()) if seed_file(seed).exists() else {}
     out: dict = {"reward_model_s": done.get("reward_model_s", rm_s), "methods": done.get("methods", {})}
     if "best_of_n" in done:
@@ -84,7 +88,7 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
         seed_file(seed).write_text(json.dumps(out) + "\n")
 
     def record(name, policy, seconds, log=None):
-        e = hw6["evaluate"](policy, sft, rm, eval_prompts, seed=seed)
+        e = L.evaluate(policy, sft, proxy_fn, eval_prompts, seed, log_prob_sums=G.completion_log_prob_sums)
         row = {"gold": e["gold"], "proxy": e["proxy"], "kl": e["kl"], "wall_s": seconds}
         if log is not None:
             row["curve"] = {k: [float(v) for v in log[k]] for k in ("gold", "proxy", "kl")}
@@ -97,28 +101,26 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
         record("SFT", sft, 0.0)
     it, n_p, grp = BUDGET["RL_ITERS"], BUDGET["RL_PROMPTS"], BUDGET["RL_GROUP"]
     for target, fn in (("gold", gold_fn), ("proxy", proxy_fn)):
-        variants = ("GRPO", "Dr. GRPO", "RLOO") if target == "gold" and all_variants else ("GRPO",)
-        for variant in variants:
+        for variant in ("GRPO", "Dr. GRPO", "RLOO") if target == "gold" and all_variants else ("GRPO",):
             if f"{variant} ({target})" in out["methods"]:
                 continue
             t0 = time.perf_counter()
-            policy, log = hw6["critic_free_train"](sft, fn, prompts, it, n_p, grp, seed=seed, variant=variant,
-                                                   beta=BUDGET["KL_BETA"], rm=rm)
+            advantage_fn, length_norm = variants[variant]
+            policy, log = L.critic_free_train(sft, fn, prompts, advantage_fn, hw6["grpo_token_loss"], iters=it,
+                                              n_prompts=n_p, group=grp, seed=seed, length_norm=length_norm,
+                                              beta=BUDGET["KL_BETA"], proxy_fn=proxy_fn)
             record(f"{variant} ({target})", policy, time.perf_counter() - t0, log)
         # PPO with a value head (hw5's given loop), same number of sampled sequences, same KL coefficient (0).
         if f"PPO ({target})" in out["methods"] or (target == "proxy" and not all_variants):
             continue
-        saved = hw5["proxy_reward"]
-        if target == "gold":
-            hw5["proxy_reward"] = lambda _rm, tokens: gold_fn(tokens)
-        try:
-            t0 = time.perf_counter()
-            policy, log = hw5["ppo_train"](sft, rm, prompts, BUDGET["KL_BETA"], it, BUDGET["PPO_BATCH"], seed=seed)
-            seconds = time.perf_counter() - t0
-        finally:
-            hw5["proxy_reward"] = saved
-        if target == "gold":   # hw5's loop logged its optimised reward as "proxy": recompute nothing, relabel
-            log = {"gold": log["gold"], "proxy": np.full(len(log["gold"]), np.nan), "kl": log["kl"]}
+        t0 = time.perf_counter()
+        policy, log = L.ppo_train(sft, fn, prompts, hw5["token_log_probs"], hw5["kl_penalised_rewards"],
+                                  hw5["ppo_token_loss"], beta=BUDGET["KL_BETA"], iters=it, batch=BUDGET["PPO_BATCH"],
+                                  seed=seed)
+        seconds = time.perf_counter() - t0
+        # hw5's loop logs the reward it optimised: the proxy on the proxy, nothing of the proxy on the gold reward
+        log = {"gold": log["gold"], "proxy": log["reward"] if target == "proxy" else np.full(len(log["gold"]), np.nan),
+               "kl": log["kl"]}
         record(f"PPO ({target})", policy, seconds, log)
 
     b = BUDGET["OFFLINE_BETA"]
@@ -126,10 +128,11 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
     kto_tokens = torch.cat([chosen[tr[:half]], rejected[tr[half:]]])
     kto_des = torch.cat([torch.ones(half, dtype=torch.bool), torch.zeros(len(tr) - half, dtype=torch.bool)])
     offline = {
-        "DPO": lambda: train_dpo(sft, chosen[tr], rejected[tr], p, b, BUDGET["OFFLINE_STEPS"], seed=seed, given=hw6),
-        "IPO": lambda: hw6["pairwise_train"](sft, chosen[tr], rejected[tr], p, lambda pc, pr, rc, rr:
-                                             hw6["ipo_loss"](pc, pr, rc, rr, b), BUDGET["OFFLINE_STEPS"], seed=seed),
-        "KTO": lambda: hw6["kto_train"](sft, kto_tokens, kto_des, p, b, BUDGET["OFFLINE_STEPS"], seed=seed),
+        "DPO": lambda: train_dpo(sft, chosen[tr], rejected[tr], p, b, BUDGET["OFFLINE_STEPS"], seed=seed),
+        "IPO": lambda: L.pairwise_train(sft, chosen[tr], rejected[tr], p, lambda pc, pr, rc, rr:
+                                        hw6["ipo_loss"](pc, pr, rc, rr, b), BUDGET["OFFLINE_STEPS"], seed=seed),
+        "KTO": lambda: L.kto_train(sft, kto_tokens, kto_des, p, hw6["kto_loss"], beta=b, steps=BUDGET["OFFLINE_STEPS"],
+                                   seed=seed),
     }
     for name, train in offline.items():
         if f"{name} beta={b}" in out["methods"]:

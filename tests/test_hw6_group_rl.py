@@ -10,6 +10,7 @@ import torch
 
 from conftest import REPO
 from rlcourse import group_rl as G
+from rlcourse import lm_training as L
 from rlcourse.lm import LMConfig, TinyLM
 
 
@@ -74,11 +75,12 @@ def test_the_shipped_models_load_and_the_reward_model_beats_chance_on_held_out_p
 
 
 def test_hw6s_release_carries_no_bradley_terry_or_dpo_loss():
-    """hw5's ``reward_model_loss`` and ``dpo_loss`` are a log-sigmoid of a difference: no hw6 release file computes one."""
+    """hw5's ``reward_model_loss`` and ``dpo_loss`` are a log-sigmoid of a difference: no hw6 release file computes one
+    (the given loops of ``rlcourse.lm_training`` take the losses as arguments)."""
     import nbformat
 
     nb = nbformat.read(REPO / "assignments" / "hw6_group_rl" / "hw6_group_rl.ipynb", as_version=4)
-    texts = {"rlcourse/group_rl.py": (REPO / "rlcourse" / "group_rl.py").read_text()}
+    texts = {f"rlcourse/{name}": (REPO / "rlcourse" / name).read_text() for name in ("group_rl.py", "lm_training.py")}
     texts.update({f"cell {i}": c.source for i, c in enumerate(nb.cells) if c.cell_type == "code"})
     for where, text in texts.items():
         assert "logsigmoid" not in text and "log_sigmoid" not in text, where
@@ -146,11 +148,13 @@ def test_the_notebook_with_the_shipped_models_is_the_benchmarks_seed_0():
     ns["seed_everything"](0)
     sft, prefs, rm = load_sft(), R.load_preferences(), G.load_reward_model()
     eval_prompts = torch.as_tensor(prefs["eval_prompts"])[:64]
+    proxy_fn = lambda s: G.proxy_score(rm, s)  # noqa: E731
     for name, policy in (("SFT", sft), ("DPO beta=0.1", G.load_dpo_policy())):
-        e = ns["evaluate"](policy, sft, rm, eval_prompts, seed=0)
+        e = L.evaluate(policy, sft, proxy_fn, eval_prompts, 0, log_prob_sums=G.completion_log_prob_sums)
         assert all(math.isclose(e[k], seed0[name][k], abs_tol=1e-5) for k in ("gold", "proxy", "kl")), (name, e)
     prompts = torch.as_tensor(prefs["chosen"])[np.flatnonzero(~prefs["test"])[:3000], :prefs["prompt_len"]]
-    for name, reward_fn in (("GRPO (gold)", ns["gold_fn"]), ("GRPO (proxy)", lambda s: G.proxy_score(rm, s))):
-        _, log = ns["critic_free_train"](sft, reward_fn, prompts, 2, 8, 8, seed=0, variant="GRPO", beta=0.0, rm=rm)
+    for name, reward_fn in (("GRPO (gold)", L.gold_fn), ("GRPO (proxy)", proxy_fn)):
+        _, log = L.critic_free_train(sft, reward_fn, prompts, ns["group_advantages"], ns["grpo_token_loss"], iters=2,
+                                     n_prompts=8, group=8, seed=0, beta=0.0, proxy_fn=proxy_fn)
         for k in ("gold", "proxy", "kl"):
             assert np.allclose(log[k], seed0[name]["curve"][k][:2], atol=1e-6), (name, k, log[k])

@@ -12,7 +12,7 @@ with ``rlcourse.group_rl.load_reward_model`` and ``load_dpo_policy``.
   ``--rm-steps`` batches of 64 pairs), with the mean and standard deviation of its raw scores on those
   pairs' sequences (``shift``, ``scale``) and its accuracy on the held-out pairs in the metadata.
 - ``datasets/hw6/dpo_beta0.1.pt``: DPO from the SFT model on the same pairs, at beta ``--beta``,
-  ``--dpo-steps`` batches of 64, with hw6's given ``pairwise_train`` (its setup cell, run here), so that
+  ``--dpo-steps`` batches of 64, with hw6's given ``rlcourse.lm_training.pairwise_train``, so that
   it is trained exactly as the notebook trains IPO.
 
 With the defaults (hw6's full budget) and seed 0 both equal seed 0 of ``bench/bench_hw6_group_rl.py``,
@@ -21,14 +21,10 @@ which imports :func:`fit_reward_model` and :func:`train_dpo` from here for its o
 from __future__ import annotations
 
 import argparse
-import contextlib
 import copy
-import io
 import time
 from dataclasses import asdict
-from pathlib import Path
 
-import nbformat
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -38,9 +34,7 @@ from rlcourse import group_rl as G
 from rlcourse import reviews as R
 from rlcourse.checkpoint import save_model
 from rlcourse.lm import ScalarHeadLM, TinyLM, load_sft, save_lm
-
-REPO = Path(__file__).resolve().parents[2]
-NOTEBOOK = REPO / "assignments" / "hw6_group_rl" / "hw6_group_rl.ipynb"
+from rlcourse.lm_training import pairwise_train
 
 
 def fit_reward_model(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, steps: int, seed: int,
@@ -68,25 +62,14 @@ def fit_reward_model(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, 
     return rm
 
 
-def given_cells(path: Path = NOTEBOOK) -> dict:
-    """hw6's given (setup) cells, executed in a fresh namespace: ``pairwise_train`` and what it needs."""
-    ns: dict = {"__name__": "__make_hw6_models__"}
-    for cell in nbformat.read(path, as_version=4).cells:
-        if cell.cell_type == "code" and "setup" in cell.metadata.get("tags", []):
-            with contextlib.redirect_stdout(io.StringIO()):
-                exec(compile(cell.source, f"<{cell.metadata.get('nbgrader', {}).get('grade_id')}>", "exec"), ns)
-    return ns
-
-
 def train_dpo(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, prompt_len: int, beta: float, steps: int,
-              seed: int, given: dict | None = None) -> TinyLM:
-    """DPO from ``sft`` with hw6's ``pairwise_train``: the mean over pairs of ``-log sigmoid(beta * margin)``."""
-    given = given or given_cells()
+              seed: int) -> TinyLM:
+    """DPO from ``sft`` with hw6's given ``pairwise_train``: the mean over pairs of ``-log sigmoid(beta * margin)``."""
 
     def dpo(pi_c, pi_r, ref_c, ref_r):
         return -F.logsigmoid(beta * ((pi_c - ref_c) - (pi_r - ref_r))).mean()
 
-    return given["pairwise_train"](sft, chosen, rejected, prompt_len, dpo, steps, seed=seed)
+    return pairwise_train(sft, chosen, rejected, prompt_len, dpo, steps, seed=seed)
 
 
 def training_pairs(n_pairs: int) -> tuple[torch.Tensor, torch.Tensor, int, dict]:
