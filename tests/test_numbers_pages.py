@@ -57,6 +57,9 @@ def test_a_changed_figure_in_a_results_file_is_caught(tmp_path):
     """Plant a different number in a copy of each results file in turn: the check names exactly that page."""
     sources = sorted(p for p in RESULTS.glob("*.json") if not p.name.endswith(".partial.json"))
     assert sources, "no results files to check"
+    pages = tmp_path / "pages"
+    numbers_pages.write(numbers_pages.render_all(RESULTS), pages)
+    assert numbers_pages.differences(numbers_pages.render_all(RESULTS), pages) == []
     for source in sources:
         results = tmp_path / source.stem
         shutil.copytree(RESULTS, results)
@@ -69,14 +72,14 @@ def test_a_changed_figure_in_a_results_file_is_caught(tmp_path):
             holder = holder[key]
         holder[path[-1]] = holder[path[-1]] * 3 + 7.25
         (results / source.name).write_text(json.dumps(data))
-        problems = numbers_pages.differences(numbers_pages.render_all(results), PAGES)
+        problems = numbers_pages.differences(numbers_pages.render_all(results), pages)
         assert any(f"{source.stem}.md" in p for p in problems), f"a changed {path} in {source.name} went unseen"
         assert all(f"{source.stem}.md" in p for p in problems), problems
 
 
 def test_a_hand_edited_page_and_a_stale_page_are_caught(tmp_path):
     pages = tmp_path / "numbers"
-    shutil.copytree(PAGES, pages)
+    numbers_pages.write(numbers_pages.render_all(RESULTS), pages)
     victim = pages / "class_throughput.md"
     text = victim.read_text()
     row = next(line for line in text.splitlines() if line.startswith("| hw0_setup"))
@@ -126,3 +129,16 @@ def test_values_are_written_as_the_pages_show_them(value, text):
 def test_mean_and_sd_keep_the_sds_precision():
     assert numbers_pages.mean_sd([3265.4, 3209.8, 1627.9]) == "2,701 ± 759"
     assert numbers_pages.mean_sd([1.0, float("inf"), None]) == "1, inf, –", "no seed is dropped from a mean"
+
+
+def test_the_experts_page_follows_the_manifest(tmp_path):
+    """A changed expert return in a copy of datasets/MANIFEST.json changes experts.md, and the check sees it."""
+    manifest = json.loads((REPO / "datasets" / "MANIFEST.json").read_text())
+    name = next(n for n in manifest["files"] if n.startswith("experts/") and "return_mean" in manifest["files"][n]["info"])
+    manifest["files"][name]["info"]["return_mean"] += 123.0
+    planted = tmp_path / "MANIFEST.json"
+    planted.write_text(json.dumps(manifest))
+    pages = tmp_path / "pages"
+    numbers_pages.write(numbers_pages.render_all(RESULTS), pages)
+    problems = numbers_pages.differences(numbers_pages.render_all(RESULTS, planted), pages)
+    assert problems and all("experts.md" in p for p in problems), problems
