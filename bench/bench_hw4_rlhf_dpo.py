@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from autograder.grader import build_reference
+from autograder.core.grader import build_reference
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "bench" / "results" / "hw4_rlhf_dpo.json"
@@ -231,7 +231,9 @@ def print_tables(summary: dict, rms: list[dict]) -> None:
 
 
 # --------------------------------------------------------------------------- every setting from preference data
-KL_CANDIDATES = (0.01, 0.03, 0.1)
+# 0.0 (no penalty) is a candidate so that the coverage rule is seen to bind or not: it was added, before its run,
+# to the three coefficients first swept (issue 34); the rule, not the true return, says whether it is taken.
+KL_CANDIDATES = (0.0, 0.01, 0.03, 0.1)
 BETA_CANDIDATES = (0.03, 0.1, 0.3, 1.0)
 PREF_PARTIAL = RESULTS.with_suffix(".preference_only.partial.json")
 
@@ -295,14 +297,33 @@ def survival_bonus(ensemble, prefs, offset: float) -> float:
     return float(intercept / slope)
 
 
+def _protocol_job(kind: str, seed: int, value: float, steps: int | None, data: str) -> dict:
+    """A run of the protocol's table: true-reward PPO (``kind="ppo"``, the first table's job) or a preference-only run."""
+    if kind == "ppo":
+        return {**job("ppo", seed, value, steps), "data": data}
+    return pref_job(kind, seed, value, steps, data)
+
+
+def _meta() -> dict:
+    import datetime
+    import subprocess
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
+    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
+            "machine": "2-core CPU"}
+
+
 def preference_only(args, workers: int) -> dict:
     """Run the protocol: sweep on seed 0, choose the KL coefficient and beta from preference data and the
     policies alone, run the other seeds at the choices, then read the true returns once for the table."""
     from rlcourse.preferences import HOPPER_PREFS_UPRIGHT_FILE, load_hopper_preferences
-    from rlcourse.rlhf import choose_beta, choose_kl_coef, disagreement_threshold, load_reward_model
+    from rlcourse.rlhf import bootstrap_ratio, choose_beta, choose_kl_coef, disagreement_threshold, load_reward_model
 
     steps = args.steps
     done = json.loads(PREF_PARTIAL.read_text()) if PREF_PARTIAL.exists() and not args.fresh else []
+    if not args.fresh and RESULTS.exists():  # runs of the last complete invocation, same code and budget: reused
+        recorded = json.loads(RESULTS.read_text()).get("preference_only", {}).get("runs", [])
+        done = [r for r in recorded if r["steps"] == (steps or 200_000)] + done
     key = lambda kind, seed, value, data: (kind, seed, value, data)
     have = {key(r["kind"], r["seed"], r["value"], r["data"]): r for r in done}
 
@@ -311,7 +332,7 @@ def preference_only(args, workers: int) -> dict:
         print(f"{len(jobs)} runs ({len(jobs) - len(todo)} reused)", flush=True)
         if todo:
             with ProcessPoolExecutor(workers) as pool:
-                futures = {pool.submit(pref_job, *j): j for j in todo}
+                futures = {pool.submit(_protocol_job, *j): j for j in todo}
                 for f in as_completed(futures):
                     r = f.result()
                     print(f"  done {r['kind']} {r['data']} seed {r['seed']} value {r['value']:g} wall {r['wall']:.0f} s",
@@ -337,10 +358,15 @@ def preference_only(args, workers: int) -> dict:
     # 2. the other seeds at the choices
     final = run([("pref_rlhf", s, kl, steps, "falls") for s in args.seeds]
                 + [("pref_dpo", s, betas[d], steps, d) for d in ("falls", "upright") for s in args.seeds])
-    # 3. the evaluation, once
+    # 3. true-reward PPO at the same budget on every seed: the first table's runs (same code), the seeds it lacks
+    # run here
     saved = json.loads(RESULTS.read_text())
-    ppo_runs = {r["seed"]: r for r in saved["runs"] if r["kind"] == "ppo" and r["steps"] == (steps or 200_000)}
-    ppo_returns = [ppo_runs[s]["final"]["return"] for s in args.seeds]
+    for r in saved["runs"]:
+        if r["kind"] == "ppo" and r["steps"] == (steps or 200_000):
+            have.setdefault(key("ppo", r["seed"], 0.0, "true reward"), {**r, "data": "true reward"})
+    ppo = run([("ppo", s, 0.0, steps, "true reward") for s in args.seeds])
+    # 4. the evaluation, once
+    ppo_returns = [r["final"]["return"] for r in ppo]
     ppo_mean = float(np.mean(ppo_returns))
     methods = {}
     for name, kind, data in (("RLHF", "pref_rlhf", "falls"), ("DPO, pairs with falls", "pref_dpo", "falls"),
@@ -350,13 +376,17 @@ def preference_only(args, workers: int) -> dict:
         methods[name] = {"value": rs[0]["value"], "seeds": [r["seed"] for r in rs], "returns": rets,
                          "return_mean": float(np.mean(rets)), "return_std": float(np.std(rets)),
                          "fraction_of_true_reward_ppo": float(np.mean(rets)) / ppo_mean,
+                         "fraction_interval": bootstrap_ratio(rets, ppo_returns),
+                         "checks": [r["check"] for r in rs],
                          "kls": [r["final"]["kl"] for r in rs], "lengths": [r["final"]["length"] for r in rs],
                          "walls": [r["wall"] for r in rs], "cpus": [r["cpu"] for r in rs],
                          "val_accuracy": [r.get("val_accuracy") for r in rs]}
     old_rm = load_reward_model("hw4/reward_model_upright.pt")
     upright_prefs = load_hopper_preferences(HOPPER_PREFS_UPRIGHT_FILE)
     meta = rm.metadata
+    covered = {str(c): ch["disagreement"] <= threshold for c, ch in kl_checks.items()}
     out = {
+        "meta": _meta(),
         "protocol": "offset b = the reward model's data_offset (its absorbing state pays 0); KL coefficient: among "
                     f"{list(KL_CANDIDATES)} (seed 0), the highest learned return among policies whose mean ensemble "
                     "disagreement is at most the 90% quantile of held-out segments'; beta: among "
@@ -364,6 +394,7 @@ def preference_only(args, workers: int) -> dict:
                     "the largest beta); then every seed at the choices; true returns read once, after",
         "kl_coef": kl, "beta": betas["falls"], "beta_upright": betas["upright"], "offset": meta["data_offset"],
         "disagreement_threshold": threshold, "kl_checks": {str(c): ch for c, ch in kl_checks.items()},
+        "kl_candidates": list(KL_CANDIDATES), "kl_covered": covered, "rule_binds": not all(covered.values()),
         "beta_val_accuracy": {d: {str(r["value"]): r["val_accuracy"] for r in sweep
                                   if r["kind"] == "pref_dpo" and r["data"] == d} for d in ("falls", "upright")},
         "sweep_true_returns": {f"{r['kind']} {r['data']} {r['value']:g}": r["final"]["return"] for r in sweep},
@@ -373,11 +404,16 @@ def preference_only(args, workers: int) -> dict:
                            "upright model, b = 5": survival_bonus(old_rm, upright_prefs, 5.0),
                            "upright model, b = 0": survival_bonus(old_rm, upright_prefs, 0.0),
                            "environment": 1.0},
-        "ppo_true_reward": {"seeds": list(args.seeds), "returns": ppo_returns, "return_mean": ppo_mean},
+        "ppo_true_reward": {"seeds": list(args.seeds), "returns": ppo_returns, "return_mean": ppo_mean,
+                            "return_std": float(np.std(ppo_returns)), "kls": [r["final"]["kl"] for r in ppo],
+                            "cpus": [r["cpu"] for r in ppo],
+                            "role": "the yardstick at equal budget (one optimiser, 200,000 steps), not a ceiling: "
+                                    "the ceiling is the optimum of the true return, which no run here knows"},
         "methods": methods,
         "fraction_of_true_reward_ppo": methods["RLHF"]["fraction_of_true_reward_ppo"],
         "returns": methods["RLHF"]["returns"],
-        "runs": sweep + [r for r in final if r not in sweep],
+        "runs": sweep + [r for r in final if r not in sweep] + [r for r in ppo if r["seed"] not in
+                                                                 {q["seed"] for q in saved["runs"] if q["kind"] == "ppo"}],
     }
     saved["preference_only"] = out
     RESULTS.write_text(json.dumps(saved, indent=1))
@@ -392,18 +428,29 @@ def print_preference_only(out: dict) -> None:
           f"(upright pairs: {out['beta_upright']:g}); reward model held-out accuracy "
           f"{out['reward_model']['test_accuracy']:.3f} (ceiling {out['reward_model']['bayes_ceiling_test']:.3f})\n")
     ppo = out["ppo_true_reward"]
-    print("| method | setting | seeds | true return | per seed | % of true-reward PPO | KL (nats/step) | CPU s |")
+    print("| method | setting | seeds | true return | per seed | % of true-reward PPO (95% bootstrap interval) "
+          "| KL (nats/step) | CPU s |")
     print("|---|---|---:|---:|---|---:|---:|---:|")
-    print(f"| PPO, true reward | – | {len(ppo['returns'])} | {ppo['return_mean']:.0f} ± {np.std(ppo['returns']):.0f} | "
-          + ", ".join(f"{v:.0f}" for v in ppo["returns"]) + " | 100% | – | – |")
+    print(f"| PPO, true reward (yardstick at equal budget) | – | {len(ppo['returns'])} | {ppo['return_mean']:.0f} ± "
+          f"{np.std(ppo['returns']):.0f} | " + ", ".join(f"{v:.0f}" for v in ppo["returns"]) + " | 100% | "
+          + (f"{np.mean(ppo['kls']):.3f} | {np.mean(ppo['cpus']):.0f} |" if "kls" in ppo else "– | – |"))
     for name, m in out["methods"].items():
         setting = (f"b = {out['offset']:.2f}, KL {m['value']:g}" if name == "RLHF" else f"β = {m['value']:g}")
+        lo, hi = m.get("fraction_interval", (np.nan, np.nan))
         print(f"| {name} | {setting} | {len(m['returns'])} | {m['return_mean']:.0f} ± {m['return_std']:.0f} | "
               + ", ".join(f"{v:.0f}" for v in m["returns"])
-              + f" | {100 * m['fraction_of_true_reward_ppo']:.0f}% | {np.mean(m['kls']):.3f} | {np.mean(m['cpus']):.0f} |")
+              + f" | {100 * m['fraction_of_true_reward_ppo']:.0f}% ({100 * lo:.0f}–{100 * hi:.0f}%) | "
+              f"{np.mean(m['kls']):.3f} | {np.mean(m['cpus']):.0f} |")
     print("\nKL sweep, seed 0 (what the choice saw): " + "; ".join(
         f"{c}: learned return {ch['learned_return']:.0f}, disagreement {ch['disagreement']:.3f}, KL {ch['kl']:.3f}"
         for c, ch in out["kl_checks"].items()) + f" (threshold {out['disagreement_threshold']:.3f})")
+    if "kl_covered" in out:
+        print("Coverage: " + "; ".join(f"{c} {'covered' if v else 'NOT covered'}" for c, v in out["kl_covered"].items())
+              + (" (the rule binds: it rejects a candidate)" if out["rule_binds"] else
+                 " (the rule does not bind: every candidate is covered)"))
+        print("Checks of the runs at the chosen KL coefficient, per seed: " + "; ".join(
+            f"seed {s}: disagreement {ch['disagreement']:.3f}, learned return {ch['learned_return']:.0f}"
+            for s, ch in zip(out["methods"]["RLHF"]["seeds"], out["methods"]["RLHF"]["checks"])))
     print("Beta sweep, seed 0, held-out accuracy: " + "; ".join(
         f"{d}: " + ", ".join(f"{b} → {a:.3f}" for b, a in accs.items()) for d, accs in out["beta_val_accuracy"].items()))
     print("Sweep true returns (read after the choice): " + "; ".join(f"{k}: {v:.0f}" for k, v in out["sweep_true_returns"].items()))
@@ -499,7 +546,8 @@ def _record_preference_only(out: dict, args) -> None:
     pre["preference_only"] = {k: v for k, v in out.items() if k != "runs"}
     PRECOMPUTED.write_text(json.dumps(pre, indent=1) + "\n")
     entry = data.read_manifest()["hw4/precomputed.json"]
-    data.add(PRECOMPUTED, entry["command"] + "; python bench/bench_hw4_rlhf_dpo.py --preference-only --record "
+    first = entry["command"].split("; python bench/bench_hw4_rlhf_dpo.py --preference-only")[0]  # the table's command
+    data.add(PRECOMPUTED, first + "; python bench/bench_hw4_rlhf_dpo.py --preference-only --record "
              f"--seeds {' '.join(map(str, args.seeds))} --workers {args.workers}", entry["seed"],
              {**entry["info"], "preference_only": "every setting chosen from preference data (bench --preference-only)"})
     print(f"recorded {PRECOMPUTED.relative_to(REPO)} (key preference_only)")

@@ -122,6 +122,28 @@ def test_choices_from_preference_data_follow_the_stated_rules():
     assert choose_beta({0.03: 0.80, 0.1: 0.83, 0.3: 0.82}) == 0.1
 
 
+def test_choose_kl_coef_can_pick_no_penalty_and_can_reject_it():
+    from rlcourse.rlhf import choose_kl_coef
+
+    checks = {0.0: {"learned_return": 3000.0, "disagreement": 0.36}, 0.01: {"learned_return": 2900.0, "disagreement": 0.30}}
+    assert choose_kl_coef(checks, 0.42) == 0.0  # covered: no penalty is a candidate like any other
+    assert choose_kl_coef(checks, 0.33) == 0.01  # not covered: the rule rejects it
+
+
+def test_bootstrap_ratio_brackets_the_ratio_and_widens_with_spread():
+    from rlcourse.rlhf import bootstrap_ratio
+
+    lo, hi = bootstrap_ratio([3000.0] * 5, [3000.0] * 5)
+    assert lo == hi == 1.0  # no spread: the interval is the point
+    steady = bootstrap_ratio([3100.0, 3200.0, 3300.0], [3200.0, 3250.0, 3150.0])
+    failed = bootstrap_ratio([3100.0, 3200.0, 3300.0], [3200.0, 3250.0, 1600.0])
+    ratio = np.mean([3100.0, 3200.0, 3300.0]) / np.mean([3200.0, 3250.0, 1600.0])
+    assert failed[0] < ratio < failed[1] and steady[0] < 1.0 < steady[1]
+    assert failed[1] - failed[0] > 5 * (steady[1] - steady[0])  # one failed seed of the denominator: far wider
+    assert failed[1] <= 3300.0 / 1600.0  # no resample goes past the extremes
+    assert bootstrap_ratio([1.0, 2.0, 4.0], [2.0, 3.0], seed=1) == bootstrap_ratio([1.0, 2.0, 4.0], [2.0, 3.0], seed=1)
+
+
 def test_reward_model_save_and_load_round_trip(tmp_path, monkeypatch):
     import rlcourse.rlhf as rlhf
 
