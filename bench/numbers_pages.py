@@ -477,10 +477,11 @@ def index(results: Path, names: list[str], data: dict[str, Any], experts: bool =
     silent = [b for b in benches if not any(r.startswith(b[len("bench_"):-len(".py")]) for r in recorded)]
     blocks = [MARK.format(source="bench/results/"), "# The numbers",
               "Every figure of the course's documentation, generated from the results files in `bench/results/` "
-              "by `bench/numbers_pages.py` (`make numbers`); `tests/test_numbers_pages.py` fails while a page "
+              "by `bench/numbers_pages.py` (`make numbers`); `test_numbers_pages.py` fails while a page "
               "and its results file disagree. Each table names the commit, date and machine load it was "
               "measured at, from its results file's `meta` object, or says they were not recorded. Times on a "
-              "shared machine are upper bounds: read them beside the load.",
+              "shared machine are upper bounds: read them beside the load. How to run each benchmark: "
+              "[benchmarks.md](../benchmarks.md).",
               table(["page", "results file", "measured by", "commit, date"], rows)]
     if experts:
         blocks += ["The shipped expert policies' returns, from `datasets/MANIFEST.json`: [experts](experts.md)."]
