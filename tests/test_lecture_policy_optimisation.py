@@ -240,6 +240,44 @@ def test_kl_estimators_bias_sign_and_variance():
         assert k[samples].mean() == pytest.approx(kl, abs=5 * k[samples].std() / np.sqrt(len(samples)))
 
 
+def _softmax(theta):
+    z = np.exp(theta - theta.max())
+    return z / z.sum()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@checks("eq-kl-estimator-grads", "dae1620a")
+def test_kl_estimators_as_losses_have_the_gradients_the_lecture_states(seed):
+    """Expected gradient of each estimator with the sampled action held fixed, by enumeration and finite differences."""
+    rng = np.random.default_rng(300 + seed)
+    theta, ref = 1.5 * rng.normal(size=5), rng.dirichlet(np.ones(5))
+    estimators = {"k1": lambda r: -np.log(r), "k2": lambda r: 0.5 * np.log(r) ** 2, "k3": lambda r: r - 1 - np.log(r)}
+    pi = _softmax(theta)                      # the sampling distribution, a constant weight once the action is drawn
+
+    def held_fixed(k):                        # sum_a pi(a) grad_theta k(ref(a) / pi_theta(a)), pi(a) not differentiated
+        return sum(pi[a] * central_difference(lambda t: k(ref[a] / _softmax(t)[a]), theta) for a in range(5))
+
+    reverse = central_difference(lambda t: np.sum(_softmax(t) * np.log(_softmax(t) / ref)), theta)
+    forward = central_difference(lambda t: np.sum(ref * np.log(ref / _softmax(t))), theta)
+    g = {name: held_fixed(k) for name, k in estimators.items()}
+    assert np.allclose(g["k1"], 0.0, atol=1e-8)
+    assert np.allclose(g["k2"], reverse, atol=1e-7)
+    assert np.allclose(g["k3"], forward, atol=1e-7)
+    assert np.abs(reverse - forward).max() > 1e-3          # the two directions differ here, so the test can fail
+    # Through the expectation: E_pi[k3] is the reverse KL for every theta, so its gradient is the reverse KL's.
+    through = central_difference(lambda t: np.sum(_softmax(t) * estimators["k3"](ref / _softmax(t))), theta)
+    assert np.allclose(through, reverse, atol=1e-7)
+    # Near the reference the two gradients agree to first order: their gap shrinks like the square of the distance.
+    base, direction = np.log(ref), rng.normal(size=5)
+    gaps = []
+    for eps in (1e-1, 1e-2):
+        t0 = base + eps * direction
+        rev = central_difference(lambda t: np.sum(_softmax(t) * np.log(_softmax(t) / ref)), t0)
+        fwd = central_difference(lambda t: np.sum(ref * np.log(ref / _softmax(t))), t0)
+        gaps.append(np.abs(rev - fwd).max())
+    assert gaps[1] < 0.03 * gaps[0]
+
+
 @checks("eq-gauss-kl", "3ada1c13")
 def test_diagonal_gaussian_kl_against_integration_and_monte_carlo():
     rng = np.random.default_rng(205)
