@@ -247,6 +247,16 @@ def passing_sides(obs: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return sides
 
 
+def open_loop_offsets(obs: np.ndarray, chunks: np.ndarray) -> np.ndarray:
+    """Where chunks lead: the lateral offset (half-widths) after driving each chunk ``(n, H, ACT_DIM)`` from its
+    observation ``(n, OBS_DIM)`` on a noise-free track, ``(n,)``. A picture of what a plan commits to."""
+    state = state_of(obs)
+    chunks = np.asarray(chunks, dtype=float)
+    for j in range(chunks.shape[1]):
+        state, _ = rt.step_states(state, chunks[:, j, 0], np.zeros(len(state)))
+    return rt.track_frame(state)[0]
+
+
 # ---------------------------------------------------------------- data
 
 def make_chunks(obs: np.ndarray, actions: np.ndarray, lengths: np.ndarray, horizon: int) -> tuple[np.ndarray, np.ndarray]:

@@ -111,3 +111,70 @@ def test_pictures_and_frames():
     mm.plot_sided_paths(ax, paths, mm.passing_sides(obs, mask))
     frames = mm.render_frames([p[:20] for p in paths], size=100, every=5)
     assert frames.shape == (4, 100, 100, 3) and frames.dtype == np.uint8 and frames.std() > 0
+
+
+def expert_chunk(state, side, task, horizon):
+    """The expert's next ``horizon`` actions from ``state`` on a noise-free track (the bench's open-loop ceiling)."""
+    expert, actions = mm.ObstacleExpert(side, task=task), []
+    for _ in range(horizon):
+        action = expert.act(mm.observe(state))
+        actions.append(action)
+        state, _ = rt.step_states(state, action[:, 0], np.zeros(len(state)))
+    return np.stack(actions, axis=1)
+
+
+def test_the_default_task_is_the_module_constants_and_commit_tasks_differ_only_as_stated():
+    task = mm.CLOSED_LOOP
+    assert (task.horizon, task.steer_noise, task.start_window, task.swerve_start, task.swerve_rise) == (
+        mm.HORIZON, mm.STEER_NOISE, mm.START_WINDOW, mm.SWERVE_START, mm.SWERVE_RISE)
+    rises = [t.swerve_rise for t in mm.COMMIT_TASKS.values()]
+    assert list(mm.COMMIT_TASKS) == ["sharp", "medium", "gentle"] and rises == sorted(rises) and len(set(rises)) == 3
+    others = {(t.start_window, t.steer_noise, t.horizon, t.swerve_start, t.swerve_offset) for t in mm.COMMIT_TASKS.values()}
+    assert len(others) == 1, "the three settings differ only in the swerve's rise"
+    a, b = mm.ObstacleTracks(4, 3), mm.ObstacleTracks(4, 3, mm.CLOSED_LOOP)
+    assert np.array_equal(a.reset(), b.reset())
+
+
+@pytest.mark.parametrize("name", list(mm.COMMIT_TASKS))
+def test_on_the_commit_tasks_the_split_is_at_the_first_state_and_the_mean_chunk_hits_the_obstacle(name):
+    task = mm.COMMIT_TASKS[name]
+    state = mm.start_states(np.random.default_rng(1), 50, task)
+    obs = mm.observe(state)
+    arc = obs[:, 2] * mm.ARC_SCALE
+    assert np.all(arc >= task.swerve_start - 0.05), "episodes start where the demonstrators have begun to swerve"
+    assert np.all(mm.open_loop_offsets(obs, np.zeros((50, 0, 1))) == pytest.approx(obs[:, 0], abs=1e-5))
+    left, right = expert_chunk(state, 1.0, task, 8), expert_chunk(state, -1.0, task, 8)
+    assert np.all((left - right)[:, :2, 0].mean(axis=1) > 0.2), "the two sides' first actions already differ"
+    assert np.all(mm.open_loop_offsets(obs, left) > mm.OBSTACLE_RADIUS)
+    assert np.all(mm.open_loop_offsets(obs, right) < -mm.OBSTACLE_RADIUS)
+    mean = mm.open_loop_offsets(obs, (left + right) / 2)
+    assert np.all(np.abs(mean) < mm.OBSTACLE_RADIUS), "the average of the two chunks leads into the obstacle's width"
+    sides = np.random.default_rng(2).choice([1, -1], size=20)
+    obs, mask = drive_task(mm.ObstacleExpert(sides, task=task).act, 20, 5, task)
+    assert mask.sum(axis=1).tolist() == [task.horizon] * 20 and mm.passing_sides(obs, mask).tolist() == sides.tolist()
+
+
+def drive_task(policy, n, seed, task):
+    env = mm.ObstacleTracks(n, seed, task)
+    obs, observations, running = env.reset(), [], []
+    while not env.done.all():
+        observations.append(obs)
+        running.append(~env.done)
+        obs, _, _, _ = env.step(policy(obs))
+    return np.stack(observations, axis=1), np.stack(running, axis=1)
+
+
+def test_the_averaging_results_are_recorded_per_seed_for_every_setting():
+    import json
+    from pathlib import Path
+
+    record = json.loads((Path(__file__).resolve().parents[1] / "bench" / "results" / "hw1b_multimodal.json").read_text())
+    assert {"policies", "budgets"} <= set(record), "the main table's entries are kept"
+    entry = record["averaging"]
+    assert [s["name"] for s in entry["settings"]] == list(mm.COMMIT_TASKS)
+    assert {"commit", "date", "load", "machine"} <= set(entry["meta"])
+    for setting in entry["settings"]:
+        for key in ("expert", "expert_chunks", "l2", "flow", "flow_left", "mixture", "l2_one_step"):
+            values = setting[key]
+            assert len(values) == len(entry["protocol"]["seeds"]) == 5
+            assert all(v is None or 0.0 <= v <= 1.0 for v in values), (setting["name"], key)
