@@ -52,10 +52,15 @@ gradescope: setup
 	@test -n "$(ID)" || { echo "usage: make gradescope ID=<assignment>"; exit 2; }
 	$(PY) -m autograder gradescope $(ID)
 
-## nbgrader's formgrader on this course, to grade written answers: http://127.0.0.1:8888/formgrader
-## (after python -m autograder nbgrader-sync; README, "Instructors: a term with this kit").
+## nbgrader's formgrader on this course, to grade written answers: http://127.0.0.1:PORT/formgrader, PORT 8888
+## if free, else a free one (make formgrader PORT=9000 to choose); after python -m autograder nbgrader-sync
+## (docs/instructors.md: Generate and Autograde are refused there by nbgrader_config.py).
 formgrader: setup
-	PATH="$(abspath $(VENV))/bin:$$PATH" $(VENV)/bin/jupyter server --no-browser --ip=127.0.0.1 --port=8888 \
+	@port="$(PORT)"; [ -n "$$port" ] || port=$$($(PY) -c 'import socket; s = socket.socket(); \
+		free = s.connect_ex(("127.0.0.1", 8888)) != 0; s.close(); s = socket.socket(); s.bind(("127.0.0.1", 0)); \
+		print(8888 if free else s.getsockname()[1])'); \
+	echo "formgrader: http://127.0.0.1:$$port/formgrader"; \
+	PATH="$(abspath $(VENV))/bin:$$PATH" $(VENV)/bin/jupyter server --no-browser --ip=127.0.0.1 --port=$$port \
 		$$([ "$$(id -u)" = 0 ] && echo --allow-root)
 
 ## Mutation testing of one assignment's hidden suite: make mutants ID=hw0_setup [ARGS="--max-per-stub 12"]

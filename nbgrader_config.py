@@ -14,3 +14,20 @@ c.CourseDirectory.course_id = ""
 c.ClearSolutions.code_stub = {"python": "# YOUR CODE HERE\nraise NotImplementedError()"}
 c.ClearSolutions.text_stub = "YOUR ANSWER HERE"
 c.ClearOutput.enabled = True
+
+# Late submissions (autograder/outputs/late.py): nbgrader's late-submission plugin, which nbgrader-sync and
+# export apply to each submission past its deadline (the assignment's due date, or a student's extension from
+# extensions.csv). No penalty as shipped; e.g. percent = 10 and cap_percent = 50: a tenth of the score per day
+# begun, at most half of it. LatePenalty.points = 1 takes a point per period instead.
+c.AssignLatePenalties.plugin_class = "autograder.outputs.late.LatePenalty"
+c.LatePenalty.per = "day"
+c.LatePenalty.percent = 0.0
+c.LatePenalty.cap_percent = 100.0
+c.LatePenalty.grace_minutes = 0.0
+
+# formgrader's Generate and Autograde buttons would delete what a synced course relies on (the student
+# notebooks; the notebooks formgrader shows) and Autograde would run student code outside the sandbox:
+# both are refused before they touch a file (autograder/outputs/formgrader_guard.py, docs/instructors.md).
+# Generate only from formgrader: `make assignments` runs `nbgrader generate_assignment` itself.
+c.NbGraderAPI.GenerateAssignment.exporter_class = "autograder.outputs.formgrader_guard.GenerateRefused"
+c.Autograde.exporter_class = "autograder.outputs.formgrader_guard.AutogradeRefused"

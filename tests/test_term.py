@@ -210,7 +210,7 @@ submission_102:
         assert gb.find_student("1815").last_name == "Lovelace" and gb.find_student("1815").first_name == "Ada"
         gb.update_or_create_assignment("fx", duedate="2026-03-02 00:00:00 UTC")
     assert grades_of(root, "late@example.edu")["q_why"] == (0, None, False), "no notebook: nothing to grade by hand"
-    grades = {(g.student_id, g.assignment): g for g in export.export(tmp_path / "long.csv", root, long=True)}
+    grades = {(g.student_id, g.assignment): g for g in export.export(tmp_path / "long.csv", root, long=True).grades}
     assert grades["1815", "fx"].late == "no" and grades["late@example.edu", "fx"].late == "yes"
     assert grades["1791", "fx"].automatic == 3 and grades["1791", "fx"].waiting == 1
     rows = list(csv.DictReader((tmp_path / "long.csv").open()))
@@ -231,7 +231,7 @@ def test_export_totals_are_automatic_plus_written_and_agree_with_nbgrader(term, 
     with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
         gb.add_student("dave", first_name="Dave")  # enrolled, never submitted
         CsvExportPlugin(to=str(tmp_path / "nbgrader.csv")).export(gb)
-    grades = export.export(tmp_path / "grades.csv", root)
+    grades = export.export(tmp_path / "grades.csv", root).grades
     rows = {r["student_id"]: r for r in csv.DictReader((tmp_path / "grades.csv").open())}
     expected = {"alice": (7, 2), "bob": (3, 0.5), "carol": (0, 0), "dave": (0, 0)}
     for student, (auto, written) in expected.items():
@@ -265,8 +265,10 @@ def test_feedback_carries_automatic_and_hand_given_scores_and_comments(term):
     gradebook.sync("fx", folder, out, root)
     give(root, "bob", "q_why", 1.5, "Say *why* the [max](http://x) cancels.")
     give(root, "bob", "Counter", 1.0, "Close.")
-    paths = feedback.write_feedback("fx", out, root)
-    assert len(paths) == 3
+    done = feedback.write_feedback("fx", out, root)
+    assert len(done.written) == 3
+    assert done.pending == [("alice", "q_why")], "alice's answer waits for a grade: the feedback says so"
+    assert "alice: q_why" in done.warnings()[0]
     text = (root / "feedback" / "bob" / "fx" / "feedback.md").read_text()
     assert "**Automatic score: 3 / 7**" in text and "Counter <b>is</b> off" not in text
     assert "- `q_why`: 1.5 / 2" in text

@@ -13,27 +13,45 @@ are left out), each item gets:
   ungradable one attempted nothing the grader could see);
 - mean score and the fraction with full marks, over all N;
 - discrimination: the Pearson correlation of the item's score with the rest of the score (the
-  total minus the item), so an item is not correlated with itself. When the item or the rest takes
-  one value across the class the correlation is undefined, and the report says "n/a" rather than
-  inventing a 0.
+  total minus the item; for a hidden test, the total minus its whole stub, so that the stub's
+  other tests, which pass and fail with it, do not count as the "rest"). When the item or the rest
+  takes one value across the class the correlation is undefined, and the report says "n/a" rather
+  than inventing a 0.
+
+When the batch was recorded in the course's nbgrader gradebook (``nbgrader-sync``) and the course is
+given (``--course``, default this repository), each written answer is an item too, with the score a
+person gave in formgrader: the totals are then the automatic score plus the written one, an answer
+not graded yet counts 0 in the totals and is left out of its own item's figures (the report says
+how many wait).
+
+Grader errors are counted and named in the report's first paragraph. Names in the similarity part
+(its tables, pages and ``similarity.csv``) are pseudonyms by default, as formgrader's grading pages
+start with names hidden (``Submission #N``; nbgrader has no setting for it): ``anon-`` and a keyed
+digest of the name, the same in every report of the batch; the key to them is
+``DIR/_pseudonyms.csv``, outside the report folder, so the folder can be shared as it is.
+``--names`` shows the submissions' names instead.
 """
 from __future__ import annotations
 
 import base64
+import csv
+import hashlib
+import hmac
 import html
 import io
+import secrets
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from autograder.outputs.batch_output import read_results
+from autograder.outputs.batch_output import read_results, read_students
 from autograder.outputs.similarity import (NEVER_A_GRADE, Pair, StubCode, pair_page, read_stub_code, release_code,
                                            similar_pairs, THRESHOLD)
 from autograder.core.store import atomic_write
-from autograder.outputs.text import cap, markdown_text, plain
-from autograder.core.results import GRADED, GRADER_ERROR, GradeResult
+from autograder.outputs.text import cap, csv_cell, markdown_text, plain
+from autograder.core.results import GRADED, GradeResult
 
 REPORT_DIR = "_class_report"
 """The report's folder inside the batch folder (a name no submission's safe name takes; see batch_output)."""
@@ -85,6 +103,14 @@ class ClassTable:
     statuses: Counter = field(default_factory=Counter)
     suite_versions: set[str] = field(default_factory=set)
     """The versions of the suite that graded the scored results, where recorded."""
+    grader_errors: list[str] = field(default_factory=list)
+    """The submissions with no score because the grader failed on them."""
+    written: list[str] = field(default_factory=list)
+    """The written answers (from the gradebook), when the batch was synced."""
+    written_scores: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    """(N, written) scores a person gave; NaN where not graded yet."""
+    written_max: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    written_answered: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
 
 
 def _attempted(stub_tests: list) -> bool:
@@ -92,8 +118,14 @@ def _attempted(stub_tests: list) -> bool:
     return any(t.reason.attempted for t in stub_tests)
 
 
-def class_table(results: dict[str, GradeResult]) -> ClassTable:
-    """Arrange the results of a batch folder by submission and item (a missing stub or test scores 0)."""
+WrittenGrades = dict[str, dict[str, tuple[float | None, bool]]]
+"""Per submission, per written answer: (the score given, or None while it waits; whether it was answered)."""
+
+
+def class_table(results: dict[str, GradeResult], written: WrittenGrades | None = None,
+                written_max: dict[str, float] | None = None) -> ClassTable:
+    """Arrange the results of a batch folder by submission and item (a missing stub or test scores 0); with
+    ``written`` (from the gradebook), the written answers as items too and in the totals."""
     scored = {n: r for n, r in sorted(results.items()) if r.has_score}
     stubs = list(dict.fromkeys(s.name for r in scored.values() for s in r.stubs))
     tests = list(dict.fromkeys((t.stub, t.name) for r in scored.values() for s in r.stubs for t in s.tests))
@@ -114,19 +146,32 @@ def class_table(results: dict[str, GradeResult]) -> ClassTable:
                 test_scores[i, test_col[(t.stub, t.name)]] = t.points if t.passed else 0.0
     test_max_arr = np.array([test_max[k] for k in tests])
     stub_max = np.array([sum(test_max[k] for k in tests if k[0] == s) for s in stubs])
-    return ClassTable(list(scored), np.array([r.score for r in scored.values()]), float(stub_max.sum()), stubs,
+    written, written_max = written or {}, written_max or {}
+    answers = list(written_max)
+    given = np.full((n, len(answers)), np.nan)
+    answered = np.zeros((n, len(answers)), dtype=bool)
+    for i, name in enumerate(scored):
+        for j, gid in enumerate(answers):
+            score, was_answered = written.get(name, {}).get(gid, (0.0, False))
+            given[i, j] = np.nan if score is None else score
+            answered[i, j] = was_answered
+    totals = np.array([r.score for r in scored.values()]) + np.nan_to_num(given).sum(axis=1)
+    maxima = np.array([written_max[g] for g in answers])
+    return ClassTable(list(scored), totals, float(stub_max.sum() + maxima.sum()), stubs,
                       stub_scores, stub_max, tests, test_scores, test_max_arr, attempted,
                       Counter(r.status for r in results.values()),
-                      {v for r in scored.values() if (v := getattr(r, "suite_version", ""))})
+                      {v for r in scored.values() if (v := getattr(r, "suite_version", ""))},
+                      sorted(n for n, r in results.items() if not r.has_score), answers, given, maxima, answered)
 
 
-def item_rest_correlation(scores: np.ndarray, totals: np.ndarray) -> np.ndarray:
-    """Per column of ``scores`` (N, M), Pearson's r between the item and ``totals`` minus it; NaN where the item
-    or the rest is constant over the class (no spread, no correlation), or fewer than two submissions."""
+def item_rest_correlation(scores: np.ndarray, totals: np.ndarray, parts: np.ndarray | None = None) -> np.ndarray:
+    """Per column of ``scores`` (N, M), Pearson's r between the item and ``totals`` minus ``parts`` (default: minus
+    the item itself; for a test, its whole stub); NaN where the item or the rest is constant over the class (no
+    spread, no correlation), or fewer than two submissions."""
     scores = np.asarray(scores, dtype=float)
     if len(totals) < 2:
         return np.full(scores.shape[1], np.nan)
-    rest = np.asarray(totals, dtype=float)[:, None] - scores
+    rest = np.asarray(totals, dtype=float)[:, None] - (scores if parts is None else np.asarray(parts, dtype=float))
     constant = (np.ptp(scores, axis=0) == 0) | (np.ptp(rest, axis=0) == 0)
     x, y = scores - scores.mean(axis=0), rest - rest.mean(axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -134,13 +179,18 @@ def item_rest_correlation(scores: np.ndarray, totals: np.ndarray) -> np.ndarray:
     return np.where(constant, np.nan, np.clip(r, -1.0, 1.0))
 
 
+WRITTEN = "written: "
+"""The label of a written answer's row among the stubs."""
+
+
 def items(table: ClassTable) -> tuple[list[Item], list[Item]]:
-    """The figures of each stub and of each hidden test (see the module docstring)."""
-    def figures(scores: np.ndarray, maxima: np.ndarray, attempted: np.ndarray, keys: list[tuple[str, str | None]]):
+    """The figures of each stub (then each written answer, if any) and of each hidden test (see the module)."""
+    def figures(scores: np.ndarray, maxima: np.ndarray, attempted: np.ndarray, keys: list[tuple[str, str | None]],
+                parts: np.ndarray | None = None):
         n = len(table.names)
         means = scores.mean(axis=0) if n else np.zeros(len(keys))
         full = (scores >= maxima[None, :]).mean(axis=0) if n else np.zeros(len(keys))
-        disc = item_rest_correlation(scores, table.totals)
+        disc = item_rest_correlation(scores, table.totals, parts)
         return [Item(stub, test, float(m), int(a), float(mu), float(f), None if np.isnan(d) else float(d))
                 for (stub, test), m, a, mu, f, d in zip(keys, maxima, attempted, means, full, disc)]
 
@@ -148,8 +198,54 @@ def items(table: ClassTable) -> tuple[list[Item], list[Item]]:
     stub_items = figures(table.stub_scores, table.stub_max, table.attempted.sum(axis=0),
                          [(s, None) for s in table.stubs])
     test_attempted = np.array([table.attempted[:, col[s]].sum() for s, _ in table.tests], dtype=int)
-    test_items = figures(table.test_scores, table.test_max, test_attempted, list(table.tests))
-    return stub_items, test_items
+    whole_stub = table.stub_scores[:, [col[s] for s, _ in table.tests]] if table.tests else None
+    test_items = figures(table.test_scores, table.test_max, test_attempted, list(table.tests), whole_stub)
+    return stub_items + written_items(table), test_items
+
+
+def written_items(table: ClassTable) -> list[Item]:
+    """Each written answer's figures over the submissions a person has graded it for (NaN: not graded yet)."""
+    out = []
+    for j, gid in enumerate(table.written):
+        scores, maximum = table.written_scores[:, j], float(table.written_max[j])
+        graded = ~np.isnan(scores)
+        g = scores[graded]
+        disc = item_rest_correlation(g[:, None], table.totals[graded])[0] if graded.sum() else np.nan
+        out.append(Item(WRITTEN + gid, None, maximum, int(table.written_answered[:, j].sum()),
+                        float(g.mean()) if len(g) else 0.0, float((g >= maximum).mean()) if len(g) else 0.0,
+                        None if np.isnan(disc) else float(disc)))
+    return out
+
+
+def written_from_gradebook(assignment: str, results_dir: Path, course_root: Path | None = None
+                           ) -> tuple[WrittenGrades, dict[str, float]]:
+    """Per synced submission, its written answers' scores in the course's gradebook (None while one waits), and
+    each answer's points; empty when the batch was never synced."""
+    students = read_students(results_dir)
+    if not students:
+        return {}, {}
+    from nbgrader.api import MissingEntry
+
+    from autograder.outputs.gradebook import course_directory, open_gradebook
+
+    out: WrittenGrades = {}
+    maxima: dict[str, float] = {}
+    with open_gradebook(course_directory(course_root)) as gb:
+        for name, ids in students.items():
+            try:
+                submitted = gb.find_submission_notebook(assignment, assignment, ids[0])
+            except (MissingEntry, IndexError):
+                continue
+            per = {}
+            for g in submitted.grades:
+                if g.cell_type == "code":
+                    continue
+                maxima[g.name] = float(g.max_score)
+                waiting = g.manual_score is None and g.auto_score is None
+                unanswered = g.manual_score is None and g.auto_score is not None and not g.needs_manual_grade
+                per[g.name] = (None if waiting else float(g.score), not unanswered)
+            out[name] = per
+    return out, maxima
 
 
 def failures(results: dict[str, GradeResult]) -> tuple[list[Failure], list[tuple[str, str, int]]]:
@@ -247,6 +343,8 @@ class Similarity:
     compared: int
     unread: list[StubCode]
     threshold: float
+    pseudonyms: bool = False
+    """Whether the names shown are pseudonyms (the key: the batch folder's ``_pseudonyms.csv``)."""
 
 
 @dataclass
@@ -263,9 +361,10 @@ class ClassReport:
     similarity: Similarity | None
 
 
-def analyse(assignment: str, results: dict[str, GradeResult]) -> ClassReport:
-    """Every figure of the report, from a batch folder's results."""
-    table = class_table(results)
+def analyse(assignment: str, results: dict[str, GradeResult], written: WrittenGrades | None = None,
+            written_max: dict[str, float] | None = None) -> ClassReport:
+    """Every figure of the report, from a batch folder's results (and the written answers' grades, if given)."""
+    table = class_table(results, written, written_max)
     stub_items, test_items = items(table)
     top, messages = failures(results)
     stats, edges, counts = distribution(table)
@@ -306,8 +405,14 @@ def _intro(report: ClassReport) -> tuple[str, str]:
     t, s = report.table, report.table.statuses
     counted = (f"{len(t.names)} submissions with a score ({s.get('graded', 0)} graded, {s.get('ungradable', 0)} "
                f"ungradable and counted at 0); maximum {t.max_total:g} points.")
-    left = (f" {s[GRADER_ERROR]} submission(s) where the grader failed are left out: they have no score "
-            "(run the batch again)." if s.get(GRADER_ERROR) else "")
+    errors = t.grader_errors
+    left = (f" {len(errors)} submission(s) where the grader failed are left out: they have no score (run the batch "
+            f"again): {', '.join(errors[:20])}" + (f" and {len(errors) - 20} more" if len(errors) > 20 else "") + "."
+            if errors else " The grader failed on no submission.")
+    if t.written:
+        waiting = int(np.isnan(t.written_scores).sum())
+        left += (f" Written answers ({', '.join(t.written)}) from the gradebook are items and in the totals"
+                 + (f"; {waiting} not graded yet count 0 there and are left out of their item." if waiting else "."))
     if len(t.suite_versions) > 1:
         left += (f" Warning: these results come from {len(t.suite_versions)} versions of the hidden suite (a "
                  "regrade of some submissions after the suite changed): per-test figures mix them; regrade all.")
@@ -362,9 +467,11 @@ def _similarity_summary(sim: Similarity) -> str:
     unread = (f" Not compared ({len(sim.unread)}): " + "; ".join(plain(f"{c.name}: {cap(c.problem, 120)}")
                                                                 for c in sim.unread[:10]) + "."
               if sim.unread else "")
+    names = (f" Names are pseudonyms, as formgrader hides names while grading; the key is {PSEUDONYMS_NAME} in the "
+             "batch folder (class-report --names shows names)." if sim.pseudonyms else "")
     return (f"{sim.compared} submissions compared on their stub code (the released notebook's code set aside); "
             f"{len(sim.pairs)} pair(s) flagged, each sharing at least {sim.threshold:.0%} of both submissions' "
-            f"compared code.{unread}")
+            f"compared code.{unread}{names}")
 
 
 STYLE = ("body{font-family:system-ui,sans-serif;max-width:72em;margin:1.5em auto;padding:0 1em}"
@@ -413,11 +520,42 @@ def html_page(report: ClassReport, images: dict[str, bytes]) -> str:
     return "".join(parts) + "</body></html>"
 
 
+PSEUDONYM_KEY = "_pseudonym_key"
+"""In the batch folder: the secret the pseudonyms are keyed with (so they cannot be recomputed from a class list)."""
+PSEUDONYMS_NAME = "_pseudonyms.csv"
+"""In the batch folder, outside the report folder: pseudonym → submission, for the instructor."""
+
+
+def pseudonyms(results_dir: Path, names: list[str]) -> dict[str, str]:
+    """A stable pseudonym per submission name (``anon-`` and an HMAC of the name under the batch's own key, made
+    longer if two collide), and the key to them written to ``results_dir/_pseudonyms.csv``."""
+    key_path = Path(results_dir) / PSEUDONYM_KEY
+    if not key_path.is_file():
+        atomic_write(key_path, secrets.token_hex(32))
+    key = key_path.read_text(encoding="utf-8").strip().encode()
+    digests = {n: hmac.new(key, n.encode("utf-8", "surrogateescape"), hashlib.sha256).hexdigest() for n in names}
+    length = 6
+    while len({d[:length] for d in digests.values()}) < len(digests):
+        length += 2
+    out = {n: f"anon-{d[:length]}" for n, d in digests.items()}
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["pseudonym", "submission"])
+    writer.writerows([p, csv_cell(n)] for n, p in sorted(out.items(), key=lambda kv: kv[1]))
+    atomic_write(Path(results_dir) / PSEUDONYMS_NAME, buffer.getvalue())
+    return out
+
+
 def find_similar(assignment: str, folder: Path, out_dir: Path, threshold: float = THRESHOLD,
-                 jobs: int = 2) -> Similarity:
+                 jobs: int = 2, rename: dict[str, str] | None = None) -> Similarity:
     """Compare the stub code of every submission in ``folder``; write a side-by-side page per flagged pair
-    into ``out_dir/similarity/`` (earlier pages removed) and return what to list."""
-    return compare_and_write(assignment, read_stub_code(assignment, folder, jobs=jobs), out_dir, threshold)
+    into ``out_dir/similarity/`` (earlier pages removed) and ``out_dir/similarity.csv``, and return what to list.
+    With ``rename`` (name → pseudonym) no name appears in any of them."""
+    codes = read_stub_code(assignment, folder, jobs=jobs)
+    if rename is not None:
+        codes = [StubCode(rename.get(c.name, c.name), c.code, c.problem.replace(c.name, rename.get(c.name, c.name))
+                          if c.name else c.problem) for c in codes]
+    return compare_and_write(assignment, codes, out_dir, threshold)
 
 
 def compare_and_write(assignment: str, codes: list[StubCode], out_dir: Path, threshold: float = THRESHOLD
@@ -439,22 +577,46 @@ def compare_and_write(assignment: str, codes: list[StubCode], out_dir: Path, thr
     closest = sorted((s for s in scores if (s[0], s[1]) not in flagged_keys), key=lambda s: -min(s[2], s[3]))
     unread = [c for c in codes if c.problem]
     compared = sum(1 for c in codes if c.code.strip())
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with (out_dir / ".similarity.csv.tmp").open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(["submission", "submission", "share of the first's code", "share of the second's", "flagged",
+                         "side by side"])
+        for pair, page in pairs:
+            writer.writerow([csv_cell(pair.a), csv_cell(pair.b), f"{pair.similarity_a:.3f}",
+                             f"{pair.similarity_b:.3f}", "yes", page])
+        for a, b, x, y in closest:
+            writer.writerow([csv_cell(a), csv_cell(b), f"{x:.3f}", f"{y:.3f}", "no", ""])
+    (out_dir / ".similarity.csv.tmp").replace(out_dir / "similarity.csv")
     return Similarity(pairs, closest[:CLOSEST_SHOWN], compared, unread, threshold)
 
 
+
 def write_class_report(assignment: str, results_dir: Path, out_dir: Path | None = None,
-                       submissions: Path | None = None, threshold: float | None = None, jobs: int = 2) -> ClassReport:
-    """Write ``report.md``, its PNGs and ``report.html`` (and the similarity pages when ``submissions`` is
-    given) into ``out_dir`` (default ``results_dir/_class_report``). Reads results only; changes no grade."""
+                       submissions: Path | None = None, threshold: float | None = None, jobs: int = 2,
+                       names: bool = False, course_root: Path | None = None) -> ClassReport:
+    """Write ``report.md``, its PNGs and ``report.html`` (and the similarity pages and CSV when ``submissions`` is
+    given, with pseudonyms unless ``names``) into ``out_dir`` (default ``results_dir/_class_report``). Reads
+    results (and, for a synced batch, the written answers' grades in the gradebook of ``course_root``) only;
+    changes no grade."""
     results_dir = Path(results_dir)
     out_dir = Path(out_dir) if out_dir is not None else results_dir / REPORT_DIR
     results = {n: r for n, r in read_results(results_dir).items() if r.assignment == assignment}
     if not results:
         raise SystemExit(f"no results of {assignment} in {results_dir} (run `python -m autograder batch` first)")
-    report = analyse(assignment, results)
+    report = analyse(assignment, results, *written_from_gradebook(assignment, results_dir, course_root))
     if submissions is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        rename = None
+        if not names:
+            from autograder.core.batch import discover
+            from autograder.core import course
+
+            every = [e.name for e in discover(Path(submissions), assignment, course.stub_names(assignment))]
+            rename = pseudonyms(results_dir, sorted(set(every) | set(results)))
         report.similarity = find_similar(assignment, Path(submissions), out_dir,
-                                         THRESHOLD if threshold is None else threshold, jobs)
+                                         THRESHOLD if threshold is None else threshold, jobs, rename)
+        report.similarity.pseudonyms = rename is not None
     images = {"totals": totals_plot(report.table, report.edges, report.counts, assignment),
               "stubs": stubs_plot(report.stub_items, assignment)}
     out_dir.mkdir(parents=True, exist_ok=True)

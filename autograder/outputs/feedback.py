@@ -7,6 +7,15 @@ the grader's comment (or "not graded yet"), any stub score or comment a person c
 formgrader, and the total, which is the gradebook's (the number ``export`` writes). With
 ``--html`` it also runs ``nbgrader generate_feedback``, whose HTML, beside it, shows the
 submitted notebook with the same scores and comments cell by cell.
+
+It says which written answers no one has graded yet (nbgrader's HTML shows them as 0), naming
+each student and answer, and which submissions got no feedback because the grader failed on them.
+
+Delivery: ``--zip DIR`` packs each student's feedback folder for an LMS: ``DIR/<ID>/<student>.zip``
+(one per student, ``feedback.md`` and the HTML at its top level) and ``DIR/<ID>-feedback.zip``
+(one folder per student inside). nbgrader's exchange (``release_feedback``) is not used: it needs a
+``course_id`` and the exchange's ``submission_secret.txt`` of ``nbgrader collect``, and this course
+releases into ``assignments/`` with an empty ``course_id``.
 """
 from __future__ import annotations
 
@@ -14,16 +23,17 @@ import dataclasses
 import os
 import subprocess
 import sys
+import zipfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from autograder.core import course
 from autograder.outputs.batch_output import read_results, read_students
 from autograder.outputs.gradebook import course_directory, open_gradebook, with_nbgrader_path
 from autograder.core.store import atomic_write
-from autograder.outputs.text import MESSAGE_CHARS, NAME_CHARS, NOTE_CHARS, cap, markdown_text, points
+from autograder.outputs.text import MESSAGE_CHARS, NAME_CHARS, NOTE_CHARS, cap, markdown_text, plain, points
+from autograder.core.batch import safe_name
 from autograder.core.results import GRADER_ERROR, GradeResult
-
-
 
 FEEDBACK_NAME = "feedback.md"
 """Each submission's feedback file, in its batch folder (and in the course's feedback/ after a sync)."""
@@ -109,9 +119,34 @@ def feedback_with_hand_grades(result: GradeResult, submitted) -> str:
     return "\n".join(out)
 
 
+@dataclass
+class FeedbackReport:
+    written: list[Path] = field(default_factory=list)
+    """The ``feedback.md`` files written."""
+    pending: list[tuple[str, str]] = field(default_factory=list)
+    """``(student, written answer)`` for each answer no one has graded yet: it shows as 0 in the feedback."""
+    not_graded: list[str] = field(default_factory=list)
+    """Submissions with no feedback because the grader failed on them (run the batch again)."""
+    zips: list[Path] = field(default_factory=list)
+
+    def warnings(self) -> list[str]:
+        out = []
+        if self.pending:
+            named = ", ".join(f"{plain(s)}: {plain(g)}" for s, g in self.pending[:30])
+            more = f" and {len(self.pending) - 30} more" if len(self.pending) > 30 else ""
+            out.append(f"warning: {len(self.pending)} written answer(s) are not graded yet and show as 0 in the "
+                       f"feedback (nbgrader's HTML too): {named}{more}. Grade them in formgrader, then run feedback "
+                       "again.")
+        if self.not_graded:
+            out.append(f"warning: no feedback for {len(self.not_graded)} submission(s) the grader failed on: "
+                       f"{', '.join(plain(n) for n in self.not_graded[:30])}; run the batch again, sync, then feedback.")
+        return out
+
+
 def write_feedback(assignment: str, results_dir: Path, course_root: Path | None = None,
-                   html: bool = False) -> list[Path]:
-    """Write ``feedback.md`` (and, with ``html``, nbgrader's feedback HTML) for every synced student."""
+                   html: bool = False, zip_dir: Path | None = None) -> FeedbackReport:
+    """Write ``feedback.md`` (and, with ``html``, nbgrader's feedback HTML) for every synced student, and with
+    ``zip_dir`` the zips for an LMS (see the module)."""
     from nbgrader.api import MissingEntry
 
     course.check_assignment(assignment)
@@ -122,10 +157,12 @@ def write_feedback(assignment: str, results_dir: Path, course_root: Path | None 
     coursedir = course_directory(course_root)
     if html:  # first: nbgrader's --force empties each feedback/<student>/<id>/ folder it writes
         generate_feedback_html(assignment, coursedir)
-    written = []
+    report = FeedbackReport()
+    folders = {}
     with open_gradebook(coursedir) as gb:
         for name, result in results.items():
             if result.status == GRADER_ERROR:
+                report.not_graded.append(name)
                 continue
             for student in students.get(name, []):
                 try:
@@ -134,8 +171,41 @@ def write_feedback(assignment: str, results_dir: Path, course_root: Path | None 
                     continue
                 folder = Path(coursedir.format_path(coursedir.feedback_directory, student, assignment))
                 atomic_write(folder / FEEDBACK_NAME, feedback_with_hand_grades(result, submitted))
-                written.append(folder / FEEDBACK_NAME)
-    return written
+                report.written.append(folder / FEEDBACK_NAME)
+                folders[student] = folder
+                report.pending += [(student, g.name) for g in submitted.grades if g.cell_type != "code"
+                                   and g.manual_score is None and g.auto_score is None]
+    if zip_dir is not None:
+        report.zips = zip_feedback(assignment, folders, Path(zip_dir))
+    return report
+
+
+def _feedback_files(folder: Path) -> list[Path]:
+    """What a student receives of a feedback folder: the Markdown and HTML, never nbgrader's bookkeeping."""
+    return sorted(p for p in folder.iterdir() if p.is_file() and not p.is_symlink() and p.suffix in (".md", ".html"))
+
+
+def zip_feedback(assignment: str, folders: dict[str, Path], out_dir: Path) -> list[Path]:
+    """``out_dir/<assignment>/<student>.zip`` per student and ``out_dir/<assignment>-feedback.zip`` of them all
+    (one folder per student, named by the student id made safe as batch makes names safe)."""
+    per_student = out_dir / assignment
+    per_student.mkdir(parents=True, exist_ok=True)
+    written = []
+    everyone = out_dir / f"{assignment}-feedback.zip"
+    tmp_all = everyone.with_name(f".{everyone.name}.tmp")
+    with zipfile.ZipFile(tmp_all, "w", zipfile.ZIP_DEFLATED) as whole:
+        for student, folder in sorted(folders.items()):
+            name = safe_name(student)
+            target = per_student / f"{name}.zip"
+            tmp = target.with_name(f".{target.name}.tmp")
+            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as one:
+                for path in _feedback_files(folder):
+                    one.write(path, path.name)
+                    whole.write(path, f"{name}/{path.name}")
+            tmp.replace(target)
+            written.append(target)
+    tmp_all.replace(everyone)
+    return [*written, everyone]
 
 
 def generate_feedback_html(assignment: str, coursedir) -> None:

@@ -20,7 +20,12 @@ Running it again updates the same rows (nbgrader's ``update_or_create_*`` and ``
 adds a second submission, and never writes ``manual_score``, ``extra_credit`` or
 ``manual_comment``: what a person gave in formgrader stays as it was, and a grade a person set
 keeps ``needs_manual_grade`` as formgrader left it. A grader error (no score) changes nothing
-of its submission in the gradebook.
+of its submission in the gradebook: its student is listed (created if new, with no submission) and
+the course's ``.nbgrader/autograder_not_recorded.json`` names it until a later sync records it, so
+``export`` leaves that grade empty and says why instead of showing a 0.
+
+A student's names and e-mail already in the gradebook (imported from the roster with ``nbgrader db
+student import roster.csv``) are kept: the sync only fills in what is empty.
 """
 from __future__ import annotations
 
@@ -45,6 +50,9 @@ from autograder.outputs.text import markdown_text, plain
 from autograder.core.results import GRADED, GRADER_ERROR, GradeResult, GraderError
 
 GRADESCOPE_METADATA = "submission_metadata.yml"
+NOT_RECORDED_NAME = ".nbgrader/autograder_not_recorded.json"
+"""In the course root: ``{assignment: {student id: why}}``, the submissions whose latest grading the sync could not
+record (the grader failed on them); read by ``export``."""
 MISSING_CELL = "(No cell with this id was found in the submission; the answer may be elsewhere in the notebook.)"
 
 
@@ -122,6 +130,43 @@ def with_nbgrader_path() -> None:
     bin_dir = str(Path(sys.executable).parent)
     if os.environ.get("PATH", "").split(os.pathsep)[0] != bin_dir:
         os.environ["PATH"] = bin_dir + os.pathsep + os.environ.get("PATH", "")
+
+
+def read_not_recorded(root: Path) -> dict[str, dict[str, str]]:
+    """The course's record of submissions the sync could not record (see :data:`NOT_RECORDED_NAME`)."""
+    try:
+        data = json.loads((Path(root) / NOT_RECORDED_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _write_not_recorded(root: Path, assignment: str, failed: dict[str, str], recorded: set[str]) -> None:
+    data = read_not_recorded(root)
+    kept = {s: why for s, why in data.get(assignment, {}).items() if s not in recorded}
+    kept.update(failed)
+    data[assignment] = kept
+    if not kept:
+        del data[assignment]
+    if data or (Path(root) / NOT_RECORDED_NAME).exists():
+        atomic_write(Path(root) / NOT_RECORDED_NAME, json.dumps(data, indent=1, sort_keys=True))
+
+
+def keep_names(gb, person: Submitter) -> None:
+    """The student in the gradebook, created if new; names and e-mail filled in only where empty there
+    (the roster's, imported with ``nbgrader db student import``, are kept)."""
+    from nbgrader.api import MissingEntry
+
+    given = {k: v for k, v in (("first_name", person.first_name), ("last_name", person.last_name),
+                               ("email", person.email)) if v is not None}
+    try:
+        student = gb.find_student(person.student_id)
+    except MissingEntry:
+        gb.update_or_create_student(person.student_id, **given)
+        return
+    empty = {k: v for k, v in given.items() if not getattr(student, k)}
+    if empty:
+        gb.update_or_create_student(person.student_id, **empty)
 
 
 # ------------------------------------------------------------------ what the assignment holds
@@ -467,6 +512,7 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
     people = _submitters(list(entries.values()), folder)
     report = SyncReport()
     students: dict[str, list[str]] = {}
+    failed: dict[str, str] = {}
     with open_gradebook(coursedir) as gb:
         register_assignment(gb, assignment, stubs, written)
         for name in sorted(set(results) | set(entries)):
@@ -479,6 +525,9 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
                 continue
             if result.status == GRADER_ERROR:
                 report.skipped.append((name, "the grader failed on it; run the batch again, then sync"))
+                for person in people[name][0]:
+                    keep_names(gb, person)
+                    failed[person.student_id] = plain(result.error or "grader error")[:300]
                 continue
             notebook, states = None, {a.grade_id: "unanswered" for a in written}
             if result.status == GRADED and entry.notebook is not None:
@@ -489,9 +538,7 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
                     continue
             submitters, timestamp = people[name]
             for person in submitters:
-                gb.update_or_create_student(person.student_id, **{k: v for k, v in (
-                    ("first_name", person.first_name), ("last_name", person.last_name), ("email", person.email))
-                    if v is not None})
+                keep_names(gb, person)
                 record_submission(gb, assignment, person.student_id, result, stubs, states, timestamp, report)
                 report.recorded.append((name, person.student_id))
                 if notebook is not None:
@@ -500,6 +547,7 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
                     atomic_write(place, nbformat.writes(notebook))
                     report.placed.append(place)
             students[name] = [p.student_id for p in submitters]
+    _write_not_recorded(Path(coursedir.root), assignment, failed, {s for _, s in report.recorded})
     atomic_write(results_dir / STUDENTS_NAME, json.dumps({**read_students(results_dir), **students}, indent=1,
                                                          sort_keys=True))
     return report

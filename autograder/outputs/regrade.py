@@ -12,6 +12,12 @@ of a batch already graded into ``DIR`` (all of them, or the named few):
 4. it prints, per submission, the automatic score before and after, the stubs that changed,
    the hand-given written score (unchanged) and the total before and after.
 
+Before it writes anything it refuses a partial regrade (``--only``) when the suite changed since the
+other submissions were graded (their recorded suite version is not the current one): grading a few
+with the new suite would leave ``gradebook.csv`` and the nbgrader gradebook with results of two
+suites. It ends with a non-zero status when the grader failed on any submission (their rows have no
+score; run it again), naming them.
+
 ``python -m autograder results-diff OLD NEW`` prints the same comparison for any two result
 folders (``DIR/_previous/<time>`` and ``DIR``, say).
 """
@@ -27,7 +33,7 @@ from autograder.core.batch import GRADEBOOK_NAME, discover
 from autograder.outputs.files import grade_folder
 from autograder.outputs.batch_output import PREVIOUS_DIR, read_results, read_students
 from autograder.core.store import RESULT_NAME
-from autograder.core.results import GradeResult
+from autograder.core.results import GRADED, GRADER_ERROR, GradeResult
 
 
 @dataclass
@@ -137,6 +143,16 @@ class Regrade:
     changes: list[Change]
     synced: bool
     written: dict[str, float | None] | None
+    grader_errors: list[str] = field(default_factory=list)
+    """Submissions the grader failed on in this regrade (no score: run it again)."""
+
+
+def other_suite_versions(assignment: str, before: dict[str, GradeResult], names: list[str]) -> dict[str, str]:
+    """Graded results not being regraded whose suite version is not the current one: ``{submission: version}``
+    (``"unknown"`` for a result older than versions)."""
+    current = course.suite_version(assignment)
+    return {n: r.suite_version or "unknown" for n, r in before.items()
+            if n not in names and r.status == GRADED and r.suite_version != current}
 
 
 def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None = None, jobs: int = 2,
@@ -152,14 +168,25 @@ def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None
     if unknown:
         raise SystemExit(f"not a submission of {folder}: {', '.join(unknown)} (submissions: {', '.join(entries)})")
     before = read_results(out_dir) if out_dir.is_dir() else {}
+    if only:
+        stale = other_suite_versions(assignment, before, names)
+        if stale:
+            listed = ", ".join(sorted(stale)[:10]) + (f" and {len(stale) - 10} more" if len(stale) > 10 else "")
+            raise SystemExit(
+                f"refused, nothing written: {assignment}'s suite changed since {len(stale)} other submission(s) were "
+                f"graded ({listed}; suite {sorted(set(stale.values()))[0]}, now {course.suite_version(assignment)}). "
+                f"Regrading only {', '.join(names)} would mix two suites in {out_dir / GRADEBOOK_NAME} and the "
+                f"gradebook. Regrade them all: python -m autograder regrade {assignment} {folder} --out {out_dir}")
     kept = archive(out_dir, [n for n in names if n in before])
     for name in names:
         (out_dir / name / RESULT_NAME).unlink(missing_ok=True)
     grade_folder(assignment, folder, out_dir, jobs=jobs, progress=progress)
-    changes = compare(before, read_results(out_dir), names)
+    after = read_results(out_dir)
+    changes = compare(before, after, names)
     synced = bool(read_students(out_dir))
     written = None
     if synced:
         sync(assignment, folder, out_dir, course_root)
         written = written_scores(assignment, out_dir, course_root)
-    return Regrade(kept, changes, synced, written)
+    errors = [n for n in names if n in after and after[n].status == GRADER_ERROR]
+    return Regrade(kept, changes, synced, written, errors)
