@@ -31,6 +31,16 @@ re-read the test against the new text and updated the digest.
 ``tests/test_lecture_links.py`` fails when a labelled equation has no test,
 when a test names a label that no longer exists, or when a digest is stale.
 
+Notebooks point into the notes with relative Markdown links, which JupyterLab
+opens from the notebook's folder::
+
+    [lecture 6, eq. (eq-kl-estimators)](../../lectures/06_rlhf.md#sec-kl-practice)
+
+:func:`notebook_links` reads them from a notebook's Markdown cells and
+:meth:`NotebookLink.problem` says why one does not resolve: the page is
+missing, or it defines no such label (a MyST target ``(label)=``, an equation
+label, or a directive's ``:label:``/``:name:``).
+
 Command line (from the repository root)::
 
     .venv/bin/python tests/lecture_links.py            # every label: digest, place, tests
@@ -274,6 +284,53 @@ def coverage(labels: Iterable[str]) -> dict[str, list[Citation]]:
     for citation in REGISTRY.values():
         by_label.setdefault(citation.label, []).append(citation)
     return by_label
+
+
+# ---------------------------------------------------------------------------
+# links from the notebooks into the notes
+# ---------------------------------------------------------------------------
+
+_TARGET = re.compile(r"^\s*\((?P<label>[^()\s]+)\)=\s*$")
+_OPTION_LABEL = re.compile(r"^\s*:(?:label|name):\s*(?P<label>\S+)\s*$")
+_MD_LINK = re.compile(r"\]\((?P<target>[^()\s]*lectures/[^()\s#]*\.md)(?:#(?P<anchor>[^()\s]*))?\)")
+
+
+def anchors(path: Path) -> set[str]:
+    """The labels a link may point at in one page: MyST targets ``(label)=``, labelled equations, and the
+    ``:label:`` or ``:name:`` of a directive (a theorem, a figure)."""
+    text = path.read_text(encoding="utf-8")
+    found = {m.group("label") for line in text.splitlines() for m in [_TARGET.match(line) or _OPTION_LABEL.match(line)] if m}
+    return found | {eq.label for eq in parse_equations(text, path)}
+
+
+@dataclass(frozen=True)
+class NotebookLink:
+    """One Markdown link from a notebook cell into ``lectures/``: where it is and what it names."""
+
+    notebook: Path
+    cell: int
+    target: str      # as written, relative to the notebook's folder
+    anchor: str      # the part after '#', or '' for none
+
+    def problem(self) -> str | None:
+        """Why the link does not resolve (a missing page, or a label that page does not define), or None."""
+        page = (self.notebook.parent / self.target).resolve()
+        if not page.is_file():
+            return f"{self.notebook.relative_to(REPO)} cell {self.cell}: {self.target} is not a file"
+        if self.anchor and self.anchor not in anchors(page):
+            return (f"{self.notebook.relative_to(REPO)} cell {self.cell}: {page.relative_to(REPO)} has no label "
+                    f"'{self.anchor}' (a MyST target '({self.anchor})=' or an equation label)")
+        return None
+
+
+def notebook_links(path: Path) -> list[NotebookLink]:
+    """Every link into ``lectures/`` in the Markdown cells of the notebook at ``path``."""
+    import json
+
+    cells = json.loads(path.read_text(encoding="utf-8"))["cells"]
+    return [NotebookLink(path, i, m.group("target"), m.group("anchor") or "")
+            for i, cell in enumerate(cells) if cell["cell_type"] == "markdown"
+            for m in _MD_LINK.finditer("".join(cell["source"]))]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -152,3 +152,49 @@ def test_a_test_fails_when_its_equation_changes(tmp_path, monkeypatch):
 def test_bad_digest_is_refused():
     with pytest.raises(ValueError, match="8 lowercase hex"):
         ll.checks("eq-x", "not-hex")
+
+
+# ---------------------------------------------------------------------------
+# links from the notebooks into the notes
+# ---------------------------------------------------------------------------
+
+NOTEBOOKS = sorted((ll.REPO / "solutions").glob("*/*.ipynb")) + sorted((ll.REPO / "assignments").glob("*/*.ipynb"))
+# Assignments whose notebooks do not point into the notes yet, each to be removed by the commit that adds links.
+UNLINKED: set[str] = {"hw1_imitation", "hw1b_multimodal", "hw4_rlhf_dpo"}
+
+
+def test_every_notebook_link_into_the_notes_names_a_page_and_a_label_that_exist():
+    links = [link for nb in NOTEBOOKS for link in ll.notebook_links(nb)]
+    assert links, "no notebook links into lectures/"
+    broken = [p for link in links if (p := link.problem())]
+    assert not broken, "notebook links that do not resolve:\n  " + "\n  ".join(broken)
+
+
+def test_every_notebook_links_its_lectures_unless_listed_as_pending():
+    ids = sorted({nb.parent.name for nb in NOTEBOOKS})
+    solution = {i: ll.REPO / "solutions" / i / f"{i}.ipynb" for i in ids}
+    unlinked = {i for i in ids if not any(link.anchor for link in ll.notebook_links(solution[i]))}
+    assert not unlinked - UNLINKED, f"notebooks with no link to a lecture section or equation: {sorted(unlinked - UNLINKED)}"
+    linked_now = sorted(UNLINKED - unlinked)
+    assert not linked_now, f"UNLINKED names notebooks that now link their lectures (remove them): {linked_now}"
+
+
+def test_a_link_to_a_missing_label_or_page_is_reported(tmp_path, monkeypatch):
+    (tmp_path / "lectures").mkdir()
+    (tmp_path / "lectures" / "ch.md").write_text(
+        "(sec-a)=\n# A\n\n$$\nx = 1\n$$ (eq-x)\n\n```{prf:theorem} T\n:label: thm-t\n```\n")
+    nb_dir = tmp_path / "solutions" / "hw"
+    nb_dir.mkdir(parents=True)
+    cells = [{"cell_type": "markdown", "metadata": {}, "source": [
+        "[ok](../../lectures/ch.md#sec-a) [eq](../../lectures/ch.md#eq-x) [thm](../../lectures/ch.md#thm-t) "
+        "[page](../../lectures/ch.md) [bad](../../lectures/ch.md#sec-b) [gone](../../lectures/no.md#sec-a)"]},
+             {"cell_type": "code", "metadata": {}, "source": ["# [not markdown](../../lectures/ch.md#zzz)"], "outputs": []}]
+    (nb_dir / "hw.ipynb").write_text(__import__("json").dumps({"cells": cells, "metadata": {}, "nbformat": 4,
+                                                               "nbformat_minor": 5}))
+    monkeypatch.setattr(ll, "REPO", tmp_path)
+    links = ll.notebook_links(nb_dir / "hw.ipynb")
+    assert [(link.target.split("/")[-1], link.anchor) for link in links] == [
+        ("ch.md", "sec-a"), ("ch.md", "eq-x"), ("ch.md", "thm-t"), ("ch.md", ""), ("ch.md", "sec-b"), ("no.md", "sec-a")]
+    problems = [link.problem() for link in links]
+    assert problems[:4] == [None] * 4
+    assert "no label 'sec-b'" in problems[4] and "is not a file" in problems[5]
