@@ -83,6 +83,40 @@ def test_synthetic_class_figures_grader_errors_left_out_ungradable_at_zero():
     assert report.messages == [("a", "wrong value", 2), ("b", "wrong value", 2)]  # once per submission and stub
 
 
+def test_a_tests_rest_leaves_out_its_whole_stub_and_grader_errors_are_named():
+    """Sibling tests of one stub pass and fail together: counting them in the rest would make every test of a
+    stub look discriminating (issue 36: 0.73 where the stub showed 0.07)."""
+    report = analyse("hw0_setup", synthetic_class())
+    t = report.table
+    for item, j in zip(report.test_items, range(len(t.tests))):
+        stub = t.stub_scores[:, t.stubs.index(item.stub)]
+        rest = t.totals - stub
+        assert item.discrimination == pytest.approx(np.corrcoef(t.test_scores[:, j], rest)[0, 1])
+        if item.stub == "a":  # two tests: the old rest (total minus the test alone) gives another figure
+            minus_test = np.corrcoef(t.test_scores[:, j], t.totals - t.test_scores[:, j])[0, 1]
+            assert abs(item.discrimination - minus_test) > 0.05
+    assert t.grader_errors == ["s7"]
+    assert "where the grader failed are left out" in markdown(report, {"totals": "t.png", "stubs": "s.png"})
+    assert "s7" in markdown(report, {"totals": "t.png", "stubs": "s.png"}).split("\n")[2]
+
+
+def test_written_answers_from_the_gradebook_are_items_and_in_the_totals():
+    written = {"s1": {"q": (2.0, True)}, "s2": {"q": (0.5, True)}, "s3": {"q": (None, True)},  # s3 waits
+               "s4": {"q": (1.0, True)}, "s5": {"q": (0.0, False)}, "s6": {"q": (0.0, False)}}
+    report = analyse("hw0_setup", synthetic_class(), written, {"q": 2.0})
+    t = report.table
+    assert t.totals.tolist() == [8, 2.5, 3, 4, 0, 0] and t.max_total == 8
+    q = report.stub_items[-1]
+    assert (q.stub, q.max_points, q.attempted) == ("written: q", 2.0, 4)
+    graded = np.array([2.0, 0.5, 1.0, 0.0, 0.0])  # s3 left out: not graded yet
+    assert q.mean == pytest.approx(graded.mean()) and q.full_marks == pytest.approx(1 / 5)
+    rest = np.array([8, 2.5, 4, 0, 0]) - graded
+    assert q.discrimination == pytest.approx(np.corrcoef(graded, rest)[0, 1])
+    a = report.stub_items[0]
+    assert a.discrimination == pytest.approx(np.corrcoef(t.stub_scores[:, 0], t.totals - t.stub_scores[:, 0])[0, 1])
+    assert "1 not graded yet" in markdown(report, {"totals": "t.png", "stubs": "s.png"})
+
+
 def test_pages_escape_student_text_inline_the_plots_and_run_no_script(tmp_path):
     hostile = "<script>alert(1)</script> [x](http://evil) ![i](http://evil/p.png) | col"
     results = synthetic_class()
@@ -149,7 +183,7 @@ def test_report_of_a_graded_class_equals_a_plain_computation(graded_class):
     from autograder.__main__ import main
 
     gradebook = (out / "gradebook.csv").read_bytes()
-    assert main(["class-report", "hw0_setup", str(folder), "--results", str(out)]) == 0
+    assert main(["class-report", "hw0_setup", str(folder), "--results", str(out), "--names"]) == 0
     assert (out / "gradebook.csv").read_bytes() == gradebook
     report = analyse("hw0_setup", read_results(out))
     names, stubs, scores, totals = _gradebook(out / "gradebook.csv")
@@ -171,7 +205,8 @@ def test_report_of_a_graded_class_equals_a_plain_computation(graded_class):
         column = tests[(item.stub, item.test)]
         assert item.mean == pytest.approx(column.mean())
         assert item.full_marks == pytest.approx(np.mean(column == item.max_points))
-        expected = np.corrcoef(column, totals - column)[0, 1] if column.std() and (totals - column).std() else None
+        rest = totals - scores[:, stubs.index(item.stub)]  # the rest leaves out the test's whole stub
+        expected = np.corrcoef(column, rest)[0, 1] if column.std() and rest.std() else None
         assert item.discrimination == (pytest.approx(expected) if expected is not None else None)
     md = (out / REPORT_DIR / "report.md").read_text()
     assert (out / REPORT_DIR / "totals.png").read_bytes()[:4] == b"\x89PNG"
