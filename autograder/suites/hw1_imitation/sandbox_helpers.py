@@ -2,18 +2,25 @@
 
 Trusted code the tests call as ``student.helpers.<name>(...)`` (and ``reference.helpers``): it
 builds objects that cannot cross the channel, in ordinary Python instead of expressions in
-strings. Student code can read this module, so it holds nothing a student may not see.
-``notebook`` is the submission's namespace (set by the worker).
+strings. Student code can read this module, so it holds nothing a student may not see, and can
+patch what it runs on, so what it returns is raw data the tests judge on the grader's side.
+``notebook`` is the submission's namespace (set by the worker); the helpers common to every suite
+(``autograder/suites/sandbox_common.py``) run before this file, in the same module.
 """
 import torch
 
+from rlcourse import data, racetrack
 from rlcourse.nets import GaussianPolicy
 
 
-def make_policy(obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (), seed: int = 0) -> GaussianPolicy:
-    """A freshly initialised GaussianPolicy, its weights drawn under ``seed``."""
+def make_policy(obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (), seed: int = 0, state=None,
+                **kwargs) -> GaussianPolicy:
+    """A freshly initialised GaussianPolicy, its weights drawn under ``seed`` (or loaded from ``state``)."""
     torch.manual_seed(seed)
-    return GaussianPolicy(obs_dim, act_dim, hidden=tuple(hidden))
+    policy = GaussianPolicy(obs_dim, act_dim, hidden=tuple(hidden), **kwargs)
+    if state is not None:
+        policy.load_state_dict(state)
+    return policy
 
 
 def train_fresh_policy(obs, actions, hidden: tuple[int, ...] = (), policy_seed: int = 0, **train_kwargs):
@@ -40,10 +47,32 @@ class FormulaOnlyPolicy(GaussianPolicy):
         return self.distribution(obs)
 
 
-def bc_policy(seed: int, obs_dim: int, act_dim: int, log_std, hidden: tuple[int, ...] = (16, 16)) -> GaussianPolicy:
-    """A seeded policy for bc_loss's tests, with the given log_std, whose log_prob and distribution raise."""
+def bc_policy(seed: int, obs_dim: int, act_dim: int, log_std, hidden: tuple[int, ...] = (16, 16),
+              bias_shift=None) -> GaussianPolicy:
+    """A seeded policy for bc_loss's tests, with the given log_std (and ``bias_shift`` added to the mean's
+    bias), whose log_prob and distribution raise."""
     torch.manual_seed(seed)
     policy = FormulaOnlyPolicy(obs_dim, act_dim, hidden=tuple(hidden))
     with torch.no_grad():
         policy.log_std.copy_(torch.as_tensor(log_std, dtype=torch.float32))
+        if bias_shift is not None:
+            policy.mean.bias.add_(torch.as_tensor(bias_shift, dtype=torch.float32))
     return policy
+
+
+def expert(name: str):
+    """A released expert: ``"hopper"`` (Hopper-v5's, from the data folder) or ``"race"`` (the race track's)."""
+    if name == "hopper":
+        return data.load_policy("experts/Hopper-v5/expert.pt")
+    if name == "race":
+        return racetrack.Expert()
+    raise ValueError(f"no expert {name!r}")
+
+
+def run_dagger(betas, obs, actions, episodes: int, seed: int, policy_seed: int = 0, hidden=(16,), state=None,
+               **train_kwargs):
+    """The submission's ``dagger`` on the race track with its expert, from a learner GaussianPolicy(4, 1, hidden)
+    seeded ``policy_seed`` (or loaded from ``state``): its (policy, history)."""
+    learner = make_policy(racetrack.OBS_DIM, 1, tuple(hidden), policy_seed, state=state)
+    return notebook["dagger"](racetrack.ENV_ID, racetrack.Expert(), learner, len(betas), list(betas), obs,  # noqa: F821
+                              actions, episodes_per_iter=episodes, seed=seed, **train_kwargs)

@@ -1,7 +1,8 @@
 """Hidden tests of hw1's `dagger`, on the race track, checked against rollouts computed on the grader's side.
 
-The student's `dagger` runs with the reference `train_bc`, `bc_loss` and `relabel_with_expert`, so
-only the DAgger loop is judged. Every rollout that a check relies on is recomputed here, with the
+The student's `dagger` runs beside its own `train_bc` (a network cannot cross to the reference's), so most
+checks judge what training does not change (the untrained learner's rollouts, the expert's at beta = 1, the
+labels); reproducibility and the final learner also depend on `train_bc`. Every rollout that a check relies on is recomputed here, with the
 trusted environment, the trusted expert and a trusted copy of the learner's weights.
 """
 import numpy as np
@@ -16,7 +17,6 @@ from rlcourse.rollouts import rollout
 HINT = ("Per iteration i: MixturePolicy(expert.act, policy.act, beta_schedule[i], rng) with one rng = "
         "np.random.default_rng(seed); rollout(mixture, env_id, episodes_per_iter, seed=seed + i * episodes_per_iter); "
         "add the real steps (episodes.obs[episodes.mask]) with the EXPERT's labels; retrain with train_bc(..., seed=seed + i).")
-LEARNER = "(torch.manual_seed(policy_seed), GaussianPolicy(4, 1, hidden=(16,)))[1]"
 EXPERT = racetrack.Expert()
 _CACHE = {}
 
@@ -28,18 +28,19 @@ def _demo():
 
 
 def _initial_learner(policy_seed):
-    torch.manual_seed(policy_seed)
-    return GaussianPolicy(4, 1, hidden=(16,)).eval()
+    """The grader's copy of the learner ``sandbox_helpers.run_dagger`` starts from."""
+    with torch.random.fork_rng():
+        torch.manual_seed(policy_seed)
+        return GaussianPolicy(4, 1, hidden=(16,)).eval()
 
 
-def _run(in_sandbox, betas, episodes=2, seed=0, policy_seed=0, learner=LEARNER, timeout=None, **train):
-    """The student's (policy, history) for a DAgger run on the race track."""
+def _run(student, betas, episodes=2, seed=0, policy_seed=0, hidden=(16,), state=None, timeout=None, **train):
+    """The student's (policy, history) for a DAgger run on the race track, from a GaussianPolicy(4, 1, hidden)
+    seeded ``policy_seed`` (or with the weights ``state``)."""
     demo = _demo()
     train = {"n_epochs": 3, "batch_size": 64, "lr": 3e-3, **train}
-    expr = (f"dagger(racetrack.ENV_ID, racetrack.Expert(), {learner}, len(betas), betas, obs, actions, "
-            "episodes_per_iter=episodes, seed=seed, **train)")
-    result = in_sandbox(expr, timeout=timeout, betas=list(betas), obs=demo.obs, actions=demo.actions, episodes=episodes,
-                            seed=seed, policy_seed=policy_seed, train=train)
+    result = student.helpers.run_dagger(list(betas), demo.obs, demo.actions, episodes, seed, policy_seed=policy_seed,
+                                        hidden=tuple(hidden), state=state, timeout=timeout, **train)
     assert isinstance(result, tuple) and len(result) == 2, "dagger should return (policy, history)"
     policy, hist = result
     assert isinstance(hist, dict) and {"returns", "dataset_sizes", "obs", "actions"} <= set(hist), \
@@ -60,10 +61,10 @@ def _rows(a):
 
 
 @stub("dagger", points=2, hint=HINT)
-def test_beta_zero_rolls_out_the_learner_and_adds_its_real_steps(student, in_sandbox):
+def test_beta_zero_rolls_out_the_learner_and_adds_its_real_steps(student):
     """beta = 0: the rollouts are the initial learner's, and exactly its real steps are added, with expert labels"""
     demo, seed = _demo(), 5
-    _, hist = _run(in_sandbox, [0.0], episodes=3, seed=seed, policy_seed=1)
+    _, hist = _run(student, [0.0], episodes=3, seed=seed, policy_seed=1)
     own = rollout(_initial_learner(1).act, racetrack.ENV_ID, 3, seed=seed)
     check_scalar(hist["returns"][0], float(own.returns.mean()), rtol=1e-4,
                  name="the first iteration's mean return (the untrained learner's own episodes)")
@@ -78,10 +79,10 @@ def test_beta_zero_rolls_out_the_learner_and_adds_its_real_steps(student, in_san
 
 
 @stub("dagger", points=2, hint="Label the visited states with the expert's actions (relabel_with_expert), never with the actions that were taken.")
-def test_every_label_is_the_experts_action(student, in_sandbox):
+def test_every_label_is_the_experts_action(student):
     """With a mixture and an untrained learner, every label in the data set is the expert's action at its state"""
     demo = _demo()
-    _, hist = _run(in_sandbox, [0.5, 0.0, 0.0], episodes=2, seed=1, policy_seed=2)
+    _, hist = _run(student, [0.5, 0.0, 0.0], episodes=2, seed=1, policy_seed=2)
     assert hist["obs"].ndim == 2 and hist["obs"].shape[1] == 4 and hist["actions"].shape == (len(hist["obs"]), 1), \
         f"the data set should be (N, 4) states and (N, 1) labels, got {hist['obs'].shape} and {hist['actions'].shape}"
     check_array(hist["obs"][:len(demo.obs)], demo.obs, rtol=0, atol=0, name="the first rows of the data set (the demonstrations)")
@@ -90,10 +91,10 @@ def test_every_label_is_the_experts_action(student, in_sandbox):
 
 
 @stub("dagger", points=2, hint=HINT)
-def test_follows_the_beta_schedule(student, in_sandbox):
+def test_follows_the_beta_schedule(student):
     """Schedule [0, 1, 1]: iteration 0 drives the learner, iterations 1 and 2 are exactly the expert's seeded episodes"""
     seed, episodes = 2, 2
-    _, hist = _run(in_sandbox, [0.0, 1.0, 1.0], episodes=episodes, seed=seed, policy_seed=3)
+    _, hist = _run(student, [0.0, 1.0, 1.0], episodes=episodes, seed=seed, policy_seed=3)
     learner = rollout(_initial_learner(3).act, racetrack.ENV_ID, episodes, seed=seed)
     check_scalar(hist["returns"][0], float(learner.returns.mean()), rtol=1e-4,
                  name="iteration 0's mean return (beta = beta_schedule[0] = 0: the learner drives)")
@@ -109,26 +110,26 @@ def test_follows_the_beta_schedule(student, in_sandbox):
 
 
 @stub("dagger", points=1, hint="Create one np.random.default_rng(seed) for the mixture and seed rollouts and training from `seed`.")
-def test_reproducible_under_a_seed(student, in_sandbox):
+def test_reproducible_under_a_seed(student):
     """Two runs with the same seed and initial learner give the same returns and data set; another seed another run"""
-    (_, first), (_, second) = (_run(in_sandbox, [0.5, 0.5], episodes=2, seed=7, policy_seed=4) for _ in range(2))
+    (_, first), (_, second) = (_run(student, [0.5, 0.5], episodes=2, seed=7, policy_seed=4) for _ in range(2))
     check_array(second["returns"], first["returns"], rtol=0, atol=0, name="the returns of the second run")
     check_array(second["obs"], first["obs"], rtol=0, atol=0, name="the data set of the second run")
-    _, other = _run(in_sandbox, [0.5, 0.5], episodes=2, seed=8, policy_seed=4)
+    _, other = _run(student, [0.5, 0.5], episodes=2, seed=8, policy_seed=4)
     assert other["obs"].shape != first["obs"].shape or not np.array_equal(other["obs"], first["obs"]), \
         "a different seed gave the same data set: seed the rollouts and the mixture from `seed`"
 
 
 @stub("dagger", points=2, hint=HINT)
-def test_learns_to_drive(student, in_sandbox, trusted_copy):
+def test_learns_to_drive(student, reference, trusted_copy):
     """Six iterations from a clone of one demonstration: the learner then stays on the track like the expert"""
-    # Pretrain with whatever `train_bc` the notebook's namespace holds (the reference's, while swapped in).
-    bc = ("(lambda p: (mean_return.__globals__['train_bc'](p, obs, actions, n_epochs=100, batch_size=64, lr=3e-3, "
-          "seed=0), p)[1])((torch.manual_seed(policy_seed), GaussianPolicy(4, 1, hidden=(64, 64)))[1])")
-    policy, hist = _run(in_sandbox, [0.0] * 6, episodes=4, seed=0, policy_seed=0, learner=bc, n_epochs=50,
-                        timeout=120)
+    demo = _demo()   # the clone is trained on the grader's side, by the reference train_bc, and handed over as weights
+    clone, _ = reference.helpers.train_fresh_policy(demo.obs, demo.actions, hidden=(64, 64), policy_seed=0, n_epochs=100,
+                                                    batch_size=64, lr=3e-3, seed=0)
+    policy, hist = _run(student, [0.0] * 6, episodes=4, seed=0, hidden=(64, 64),
+                        state=reference.helpers.module_state(clone), n_epochs=50, timeout=120)
     expert = rollout(EXPERT.act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
-    got = rollout(trusted_copy(policy).act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
+    got = rollout(trusted_copy(policy, 4, 1, (64, 64)).act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
     assert got >= 0.8 * expert, (f"after six iterations the learner earns about {round(100 * got / expert, -1):.0f}% of the "
                                  "expert's return on the grader's episodes; the reference reaches the expert's level "
                                  "(at least 80% is needed)")
