@@ -48,9 +48,9 @@ def test_eps_dtype_and_input_left_alone(student, rng):
     """A group with a tiny spread (eps matters), a given eps, float32 in gives float32 out, the input is not modified"""
     r = np.array([[0.0, 1e-4, 2e-4, 3e-4], [1.0, 2.0, 4.0, 8.0]]) + rng.normal(size=(2, 1))
     x = torch.as_tensor(r)
-    got = student.eval("(group_advantages(x), x)", x=x)
-    expect_close(got[0], _grpo(r), "the advantages of a group with a tiny spread (default eps = 1e-4)", rtol=1e-5)
-    expect_close(got[1], r, "the rewards after the call (modified in place?)")
+    out, args, _ = student.helpers.call_and_inputs("group_advantages", [x])
+    expect_close(out, _grpo(r), "the advantages of a group with a tiny spread (default eps = 1e-4)", rtol=1e-5)
+    expect_close(args[0], r, "the rewards after the call (modified in place?)")
     expect_close(student.group_advantages(x, eps=0.5), _grpo(r, eps=0.5), "the advantages with eps = 0.5", rtol=1e-5)
     out = student.group_advantages(x.float())
     assert type(out) is torch.Tensor and out.dtype == torch.float32, "float32 rewards should give float32 advantages"

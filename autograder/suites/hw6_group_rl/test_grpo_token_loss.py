@@ -8,8 +8,23 @@ from conftest import as_array, expect_close, scalar
 HINT = ("Per token: max(-ratio * A_b, -clip(ratio, 1 - eps, 1 + eps) * A_b) + beta * (exp(ref - logp) - (ref - logp) - 1), "
         "ratio = exp(logp - logp_old), A_b the row's advantage; length_norm=True: mean over each row's masked tokens, "
         "then over rows; False: masked sum / (B * T).")
-CALL = "grpo_token_loss(lp, lp_old, lp_ref, adv, mask, clip_eps=eps, beta=beta, length_norm=norm)"
-GRAD = f"(lambda lp: torch.autograd.grad({CALL}, lp)[0])(lp0.clone().requires_grad_())"
+
+
+def _args(lp, lp_old, lp_ref, adv, mask, eps, beta, norm):
+    """The stub's arguments: positional, then keyword."""
+    return [lp, lp_old, lp_ref, adv, mask], dict(clip_eps=eps, beta=beta, length_norm=norm)
+
+
+def _loss(student, lp, **kw):
+    """The student's loss."""
+    args, kwargs = _args(lp, **kw)
+    return student.grpo_token_loss(*args, **kwargs)
+
+
+def _grad(student, lp, **kw):
+    """The student's d loss / d logp, by autograd in the sandbox (a raw tensor, judged here)."""
+    args, kwargs = _args(lp, **kw)
+    return student.helpers.grad("grpo_token_loss", args, kwargs, wrt=[0])[0]
 
 
 def _numpy_loss(lp, lp_old, lp_ref, adv, mask, eps, beta, norm):
@@ -28,8 +43,8 @@ def _one_token(student, ratio, adv, eps=0.2):
               adv=torch.tensor([adv], dtype=torch.float64), mask=torch.tensor([[0.0, 1.0]], dtype=torch.float64),
               eps=eps, beta=0.0, norm=True)
     lp0 = torch.tensor([[0.0, float(np.log(ratio))]], dtype=torch.float64)
-    loss = scalar(student.eval(CALL, lp=lp0, **kw))
-    grad = as_array(student.eval(GRAD, lp0=lp0, **kw), "the gradient")
+    loss = scalar(_loss(student, lp0, **kw))
+    grad = as_array(_grad(student, lp0, **kw), "the gradient")
     return loss, grad[0, 1]
 
 
@@ -70,10 +85,10 @@ def test_k3_penalty_value_and_gradient(student, rng):
     beta = float(rng.uniform(0.05, 0.5))
     kw = dict(lp_old=torch.as_tensor(lp), lp_ref=torch.as_tensor(lp_ref), adv=torch.zeros(b, dtype=torch.float64),
               mask=torch.as_tensor(mask), eps=0.2, beta=beta, norm=True)
-    got = scalar(student.eval(CALL, lp=torch.as_tensor(lp), **kw))
+    got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     want = _numpy_loss(lp, lp, lp_ref, np.zeros(b), mask, 0.2, beta, True)
     expect_close(torch.tensor(got), want, "the k3 penalty", rtol=1e-6)
-    grad = student.eval(GRAD, lp0=torch.as_tensor(lp), **kw)
+    grad = _grad(student, torch.as_tensor(lp), **kw)
     want_grad = beta * (1 - np.exp(lp_ref - lp)) * mask / mask.sum(1, keepdims=True) / b
     expect_close(grad, want_grad, "d loss / d logp of the k3 penalty", rtol=1e-6, atol=1e-12)
 
@@ -100,10 +115,10 @@ def test_ragged_batch_grpo_normalisation(student, rng):
     beta = float(rng.uniform(0.02, 0.2))
     kw = dict(lp_old=torch.as_tensor(lp_old), lp_ref=torch.as_tensor(lp_ref), adv=torch.as_tensor(adv),
               mask=torch.as_tensor(mask), eps=0.2, beta=beta, norm=True)
-    got = scalar(student.eval(CALL, lp=torch.as_tensor(lp), **kw))
+    got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     expect_close(torch.tensor(got), _numpy_loss(lp, lp_old, lp_ref, adv, mask, 0.2, beta, True),
                  "the loss with length_norm=True", rtol=1e-6)
-    grad = as_array(student.eval(GRAD, lp0=torch.as_tensor(lp), **kw), "the gradient")
+    grad = as_array(_grad(student, torch.as_tensor(lp), **kw), "the gradient")
     assert np.all(grad[mask == 0] == 0), "masked tokens must get exactly zero gradient"
 
 
@@ -114,7 +129,7 @@ def test_ragged_batch_dr_grpo_normalisation(student, rng):
     beta = float(rng.uniform(0.02, 0.2))
     kw = dict(lp_old=torch.as_tensor(lp_old), lp_ref=torch.as_tensor(lp_ref), adv=torch.as_tensor(adv),
               mask=torch.as_tensor(mask), eps=0.2, beta=beta, norm=False)
-    got = scalar(student.eval(CALL, lp=torch.as_tensor(lp), **kw))
+    got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     expect_close(torch.tensor(got), _numpy_loss(lp, lp_old, lp_ref, adv, mask, 0.2, beta, False),
                  "the loss with length_norm=False", rtol=1e-6)
 
@@ -127,6 +142,6 @@ def test_each_row_has_its_own_advantage(student, rng):
     mask[:, 1:] = 1
     kw = dict(lp_old=torch.as_tensor(lp_old), lp_ref=torch.as_tensor(lp_ref), adv=torch.as_tensor(adv),
               mask=torch.as_tensor(mask), eps=0.2, beta=0.0, norm=True)
-    got = scalar(student.eval(CALL, lp=torch.as_tensor(lp), **kw))
+    got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     expect_close(torch.tensor(got), _numpy_loss(lp, lp_old, lp_ref, adv, mask, 0.2, 0.0, True),
                  "the loss of a square batch", rtol=1e-6)

@@ -31,9 +31,7 @@ def test_gradient(student, rng):
     """Autograd gradients with respect to pi_chosen and pi_rejected: 2 (h - 1/(2 beta)) / N and its negative"""
     pc, pr, rc, rr = _inputs(rng, n=6)
     beta = float(rng.uniform(0.1, 1.0))
-    kw = dict(pc=pc, pr=pr, rc=rc, rr=rr, beta=beta)
-    g_c = student.eval("(lambda x: torch.autograd.grad(ipo_loss(x, pr, rc, rr, beta), x)[0])(pc.clone().requires_grad_())", **kw)
-    g_r = student.eval("(lambda x: torch.autograd.grad(ipo_loss(pc, x, rc, rr, beta), x)[0])(pr.clone().requires_grad_())", **kw)
+    g_c, g_r = student.helpers.grad("ipo_loss", [pc, pr, rc, rr, beta], wrt=[0, 1])
     h = ((pc - rc) - (pr - rr)).numpy()
     want = 2 * (h - 1 / (2 * beta)) / len(h)
     expect_close(g_c, want, "d loss / d pi_chosen", rtol=1e-6)
