@@ -12,6 +12,7 @@
   assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
+  new ID [--title TEXT]              write a new assignment's two-stub skeleton (notebook, suite, samples)
   mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/authoring/mutants.py)
   nbgrader-sync, feedback, export, regrade, results-diff, class-report   the term after batch
                                      (autograder/outputs/cli.py)
@@ -178,6 +179,16 @@ def _cmd_samples(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_new(args: argparse.Namespace) -> int:
+    from autograder.authoring.new import create
+
+    for path in create(args.assignment, args.title):
+        print(f"wrote {path}")
+    print(f"next: replace the two stubs in solutions/{args.assignment}/, then `python -m autograder assignments "
+          f"{args.assignment}` and `python -m autograder samples {args.assignment}` (CONTRIBUTING.md)")
+    return 0
+
+
 def _cmd_mutants(args: argparse.Namespace) -> int:
     from autograder.authoring.mutants import command
 
@@ -237,6 +248,10 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("samples", help="regenerate sample submissions")
     p.add_argument("assignment")
     p.set_defaults(fn=_cmd_samples)
+    p = sub.add_parser("new", help="write a new assignment's skeleton")
+    p.add_argument("assignment")
+    p.add_argument("--title", default="a new assignment")
+    p.set_defaults(fn=_cmd_new)
     p = sub.add_parser("mutants", help="grade mutants of each solution stub with its hidden tests and public check")
     p.add_argument("assignment")
     p.add_argument("--stub", action="append", default=[], help="only this stub (repeatable)")

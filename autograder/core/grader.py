@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ast
 import contextlib
+import hashlib
 import io
 import os
 import sys
@@ -28,9 +29,10 @@ from autograder.core.notebook import find_stubs, imported_modules, manual_cells,
 from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, Reason, StubResult, TestOutcome
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
-from autograder.core.session import (HELPERS, Cell, CellStatus, LocalTransport, Namespace, ReferenceCache,
+from autograder.core.session import (CPU_WAIT_STRETCH, HELPERS, Cell, CellStatus, LocalTransport, Namespace, ReferenceCache,
                                      SandboxFailure, SandboxTimeout, Session, StudentError, failure_reason)
 from autograder.core.supervisor import Zygote
+from autograder.core.trusted_work import TrustedWorkTimeout, bounded
 
 FAST_PARAMETERS = {"FAST": True}
 SANDBOX_HELPERS = "sandbox_helpers.py"
@@ -65,6 +67,11 @@ def feedback_message(exc: BaseException) -> str:
         return message.strip() or "a hidden check failed"
     if isinstance(exc, pytest.fail.Exception):
         return str(exc.msg)
+    if isinstance(exc, TrustedWorkTimeout):
+        return str(exc)
+    if isinstance(exc, MemoryError) or (isinstance(exc, RuntimeError) and "can't allocate memory" in str(exc)):
+        return ("checking your code's results needed more memory than a test may use (do they have the sizes "
+                "the docstring asks for?)")
     return (f"the result could not be checked ({type(exc).__name__}: {str(exc)[:REFERENCE_ERROR_CHARS]}); "
             "check its type and shape")
 
@@ -85,6 +92,8 @@ def test_reason(exc: BaseException | None) -> Reason:
         return exc.status.reason
     if isinstance(exc, (StudentError, SandboxFailure)):
         return failure_reason(exc)
+    if isinstance(exc, TrustedWorkTimeout):
+        return Reason.TIMEOUT
     return Reason.WRONG
 
 
@@ -92,9 +101,11 @@ class SuitePlugin:
     """Fixtures for the hidden suites, and the collector of their outcomes."""
 
     def __init__(self, student: Namespace, reference: Namespace, status: dict[str, CellStatus],
-                 session: Session | None = None, dependencies: dict[str, list[str]] | None = None) -> None:
+                 session: Session | None = None, dependencies: dict[str, list[str]] | None = None,
+                 input_key: int = 0) -> None:
         self.student_ns, self.reference_ns, self.status = student, reference, status
         self.session, self.dependencies = session, dependencies or {}
+        self.input_key = input_key
         self.outcomes: list[TestOutcome] = []
         self.grader_faults: list[str] = []
         self.collected: list[tuple[Any, pytest.Item]] = []
@@ -127,13 +138,26 @@ class SuitePlugin:
             except (SandboxFailure, StudentError):
                 pass
 
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_call(self, item: pytest.Item):
+        """The test's body, with the grader's own work for it bounded in time and memory (``trusted_work``)."""
+        if self.session is None:
+            yield
+            return
+        limits = self.session.limits
+        with bounded(limits.test_seconds * CPU_WAIT_STRETCH, limits.trusted_bytes):
+            yield
+
     @pytest.fixture
     def reference(self) -> Namespace:
         return self.reference_ns
 
     @pytest.fixture
     def rng(self, request: pytest.FixtureRequest) -> np.random.Generator:
-        return np.random.default_rng(zlib.crc32(request.node.name.encode()))
+        """The test's hidden inputs: seeded by the test and by the submission's own code (``input_key``), so an
+        answer learnt in one submission (read out through its error text, say) is worth nothing in the next,
+        while the same code graded again meets the same inputs."""
+        return np.random.default_rng([zlib.crc32(request.node.name.encode()), self.input_key])
 
     @pytest.hookimpl(hookwrapper=True)
     def pytest_runtest_makereport(self, item: pytest.Item, call: pytest.CallInfo):
@@ -160,6 +184,14 @@ def _title(item: pytest.Item) -> str:
     """A test's first docstring line, else its name in words."""
     doc = (getattr(item, "obj", None).__doc__ or "").strip().splitlines()
     return doc[0] if doc else item.name.removeprefix("test_").replace("_", " ")
+
+
+def input_key(suite_version: str, stubs: dict[str, Any]) -> int:
+    """A 64-bit key from the suite's version and the submission's stub cells, for the hidden inputs."""
+    digest = hashlib.sha256(suite_version.encode())
+    for name in sorted(stubs):
+        digest.update(f"\0{name}\0{stubs[name].source}".encode("utf-8", "surrogatepass"))
+    return int.from_bytes(digest.digest()[:8], "big")
 
 
 def build_reference(assignment: str, parameters: dict[str, Any] = FAST_PARAMETERS) -> dict[str, Any]:
@@ -282,7 +314,7 @@ class Grader:
             result.isolation = session.isolation
             reference = LocalTransport(self.reference_ns, self.helpers, self.reference_cache)
             plugin = SuitePlugin(Namespace(session, "student"), Namespace(reference, "reference"), session.status,
-                                 session, self.dependencies)
+                                 session, self.dependencies, input_key(self.version, stubs))
             self._run_suite(plugin)
             if plugin.grader_faults:
                 raise GraderError("; ".join(plugin.grader_faults))

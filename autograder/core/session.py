@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
 from autograder.core.results import SYNTAX_ERRORS, GraderError, Reason
+from autograder.core.trusted_work import TrustedWorkTimeout
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import (ChannelClosed, ChannelTimeout, HandleRef, LentRef, ProtocolError, decode,
                                      encode)
@@ -347,6 +348,7 @@ class Session(Transport):
         self.test_deadline: float | None = None
         self.test_credit = 0.0      # CPU wait forgiven in this test's calls so far
         self.credit_used = 0.0      # and in the whole submission's
+        self.reference_calls = 0    # reference stand-in calls in this test
 
     # -------------------------------------------------------------- lifecycle
 
@@ -413,6 +415,7 @@ class Session(Transport):
         """A hidden test starts: from now its calls share one deadline, ``test_seconds`` away."""
         self.test_deadline = time.monotonic() + self.limits.test_seconds
         self.test_credit = 0.0
+        self.reference_calls = 0
 
     def end_test(self) -> None:
         self.test_deadline = None
@@ -466,9 +469,15 @@ class Session(Transport):
         except ChannelTimeout:
             self.worker.kill()
             raise SandboxTimeout(why) from None
+        except TrustedWorkTimeout:  # interrupted mid-exchange: the channel is out of step, the worker must go
+            self.worker.kill()
+            raise
         except (ChannelClosed, BrokenPipeError, OSError):
             tail = self.worker.tail().strip()
             self.worker.kill()
+            if self.worker.over_memory:
+                raise SandboxFailure(f"used more than {self.limits.memory_bytes / 2**30:.3g} GB of memory, counting "
+                                     "every process it started, and was stopped") from None
             raise SandboxFailure("crashed the sandbox (the process exited or was killed: out of memory, "
                                  "os._exit, a signal, or a resource limit)"
                                  + (f"; its last output: {tail[-TAIL_QUOTED:]}" if tail else "")) from None
@@ -490,7 +499,14 @@ class Session(Transport):
             name = callback["reference"]
             if self.reference_call is None or name not in self.standing_in:
                 return {"ok": False, "error": f"`{name}` is not available from the grader now"}, []
-            return self.reference_call(str(name), reply.get("args"), blobs)
+            self.reference_calls += 1
+            if self.reference_calls > self.limits.reference_calls:
+                return {"ok": False, "error": f"`{name}` was called more than {self.limits.reference_calls} times "
+                                              "in one test: the grader answers no more"}, []
+            answer, answer_blobs = self.reference_call(str(name), reply.get("args"), blobs)
+            if sum(len(b) for b in answer_blobs) > self.limits.message_bytes:
+                return {"ok": False, "error": f"`{name}`'s answer is larger than the channel carries"}, []
+            return answer, answer_blobs
         if "lent" in callback:
             return self._answer_lent(callback.get("lent"), str(callback.get("method")), reply.get("args"), blobs)
         raise ProtocolError("unknown callback")

@@ -22,6 +22,7 @@ import time
 from dataclasses import asdict
 from typing import Any
 
+from autograder.core.memory import MemoryGuard
 from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig, safe_environment
 from autograder.sandbox.isolation import PR_SET_DUMPABLE, libc
 from autograder.sandbox.wire import MAX_MESSAGE_BYTES, FrameReader, send_message
@@ -67,7 +68,7 @@ class Zygote:
             finally:
                 for fd in (to_r, from_w, out_w):
                     os.close(fd)
-        return WorkerProcess(to_w, from_r, out_r, config.limits.message_bytes)
+        return WorkerProcess(to_w, from_r, out_r, config.limits.message_bytes, config.limits.memory_bytes)
 
     def _wait_ready(self) -> None:
         """Wait, once, for the zygote's word that its imports are done; raises :class:`SandboxStartError`."""
@@ -98,8 +99,11 @@ class SandboxStartError(RuntimeError):
 class WorkerProcess:
     """The grader's end of one worker: request channel, output capture, and kill."""
 
-    def __init__(self, to_fd: int, from_fd: int, out_fd: int, max_message: int = MAX_MESSAGE_BYTES) -> None:
+    def __init__(self, to_fd: int, from_fd: int, out_fd: int, max_message: int = MAX_MESSAGE_BYTES,
+                 memory_bytes: int | None = None) -> None:
         self.to_fd, self.reader, self.out_fd = to_fd, FrameReader(from_fd, max_message), out_fd
+        self.memory_bytes = memory_bytes
+        self.guard: MemoryGuard | None = None
         os.set_blocking(to_fd, False)  # every write has a deadline: a worker that stops reading cannot hold the grader
         self.output = bytearray()
         self.pid = self.pgid = None
@@ -124,6 +128,8 @@ class WorkerProcess:
         deadline = time.monotonic() + timeout
         header, _ = self.reader.read_message(deadline=deadline)
         self.pid, self.pgid, self.isolation = header.get("pid"), header.get("pgid"), header.get("isolation")
+        if self.memory_bytes and isinstance(self.pgid, int) and self.pgid > 1:  # the launcher leads the group
+            self.guard = MemoryGuard(self.pgid, self.memory_bytes, self._signal_tree)  # the grader's thread closes
         ready, _ = self.reader.read_message(deadline=deadline)
         if not ready.get("ok"):
             raise SandboxStartError(ready.get("error", "the sandbox failed to start"))
@@ -148,20 +154,31 @@ class WorkerProcess:
         """Read a message, whole and within the size cap, by ``deadline``."""
         return self.reader.read_message(deadline=deadline)
 
+    @property
+    def over_memory(self) -> bool:
+        """Whether the guard killed the worker's tree for holding more than its memory limit."""
+        return self.guard is not None and self.guard.exceeded
+
     def tail(self) -> str:
         return bytes(self.output[-TAIL_CHARS:]).decode("utf-8", "replace")
 
-    def kill(self) -> None:
-        """Kill the worker and, through its PID namespace (or process group), everything it started."""
-        if not self.alive:
-            return
-        self.alive = False
+    def _signal_tree(self) -> None:
+        """SIGKILL to the worker and its process group (the PID namespace takes the rest with its init)."""
         for target, kill in ((self.pid, os.kill), (self.pgid, os.killpg)):
             if isinstance(target, int) and target > 1:
                 try:
                     kill(target, signal.SIGKILL)
                 except (ProcessLookupError, PermissionError):
                     pass
+
+    def kill(self) -> None:
+        """Kill the worker and, through its PID namespace (or process group), everything it started."""
+        if self.guard is not None:
+            self.guard.stop()
+        if not self.alive:
+            return
+        self.alive = False
+        self._signal_tree()
         for fd in (self.to_fd, self.reader.fd, self.out_fd):
             try:
                 os.close(fd)

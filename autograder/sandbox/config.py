@@ -29,8 +29,9 @@ class Limits:
     The grader enforces the deadlines and the message cap: ``call_seconds`` per call, ``test_seconds`` per
     hidden test counted from its start (every call, write and callback of the test included: a worker that
     keeps calling back cannot stretch it), ``exec_seconds`` per cell, ``submission_seconds`` for all of a
-    submission's time in the sandbox, and ``message_bytes``, the most one message from the worker may hold.
-    The rest are kernel limits set in the worker.
+    submission's time in the sandbox, and ``message_bytes``, the most one message from the worker may hold;
+    ``trusted_bytes`` and ``reference_calls`` bound the grader's own work for one test. The rest are kernel
+    limits set in the worker (``memory_bytes`` per process there, and for the whole tree by the grader).
     """
 
     call_seconds: float = 20.0
@@ -44,6 +45,10 @@ class Limits:
     file_bytes: int = 16 * 1024**2
     tmp_bytes: int = 64 * 1024**2
     open_files: int = 256
+    trusted_bytes: int = 1024**3
+    """How much the grader's own address space may grow while one test runs (its work for the submission)."""
+    reference_calls: int = 5000
+    """How many times one test's code may call a reference stand-in (a dependency of the stub under test)."""
 
 
 @dataclass

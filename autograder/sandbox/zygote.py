@@ -26,6 +26,7 @@ WORKER_UID_BASE, WORKER_UID_SPAN = 20000, 40000
 MAX_REQUEST_BYTES = 1 << 20
 """A spawn request (its JSON config) is far smaller than this."""
 WORKDIR = "/tmp/work"
+PR_SET_CHILD_SUBREAPER = 36
 IMPORT_TIME_PROBES = {"gymnasium": ("gymnasium.envs.mujoco.mujoco_rendering",)}
 """Modules imported in the zygote whenever their package is preloaded, because importing them starts a
 program (glfw checks its library's version in a child interpreter). A worker reads the course's files
@@ -89,6 +90,7 @@ def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> N
     """[launcher] Enter namespaces, fork the worker, report its pid, wait for it; never returns."""
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     os.setsid()
+    isolation.libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)  # orphans of the worker's tree stay under this one
     level = isolation.enter_namespaces()
     _die_with_parent(zygote)
     uid = WORKER_UID_BASE + os.getpid() % WORKER_UID_SPAN
