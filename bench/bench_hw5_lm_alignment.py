@@ -73,7 +73,7 @@ def run_seed(ns: dict, seed: int) -> dict[str, dict]:
     eval_prompts = torch.as_tensor(prefs["eval_prompts"])[: BUDGET["N_EVAL"]]
     out: dict[str, dict] = {}
     t0 = time.perf_counter()
-    rm = L.train_reward_model(sft, chosen[train], rejected[train], ns["reward_model_loss"], BUDGET["RM_STEPS"], seed=seed)
+    rm = L.fit_reward_model(sft, chosen[train], rejected[train], ns["reward_model_loss"], BUDGET["RM_STEPS"], seed=seed)
     rm_time = time.perf_counter() - t0
     proxy = lambda s: ns["proxy_reward"](rm, s)  # noqa: E731
     sequence_log_prob = ns["sequence_log_prob"]

@@ -4,7 +4,7 @@ Each loop is the one its notebook used to define in a locked cell, moved here un
 the same seeds, the same order of random draws, the same updates. What a notebook asks its students to
 write is never here but passed in (as :func:`rlcourse.ppo.ppo` takes hw4's ``compute_gae`` and ``ppo_loss``):
 
-* hw5: :func:`train_reward_model` (calls ``reward_model_loss``), :func:`ppo_train` (``token_log_probs``,
+* hw5: :func:`fit_reward_model` (calls ``reward_model_loss``), :func:`ppo_train` (``token_log_probs``,
   ``kl_penalised_rewards``, ``ppo_token_loss``), :func:`dpo_train` (``sequence_log_prob``, ``dpo_loss``);
 * hw6: :func:`critic_free_train` (an advantage function and ``grpo_token_loss``), :func:`pairwise_train`
   (any loss of a batch of pairs: IPO), :func:`kto_train` (``kto_loss``);
@@ -57,7 +57,7 @@ def evaluate(policy: TinyLM, ref: TinyLM, proxy_fn: Scores, prompts: torch.Tenso
 
 
 # --------------------------------------------------------------------------- hw5
-def train_reward_model(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, reward_model_loss: Callable,
+def fit_reward_model(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, reward_model_loss: Callable,
                        steps: int, seed: int, batch: int = 64, lr: float = 3e-4) -> ScalarHeadLM:
     """Fit a scalar-head copy of ``sft`` to preference pairs (row ``i`` of ``chosen`` beat row ``i`` of ``rejected``).
 

@@ -107,12 +107,12 @@ def test_train_reward_model_fits_pairs_with_the_given_loss_and_standardises(hw5)
     order = gold[:48] > gold[48:]
     chosen = torch.where(order[:, None], x[:48], x[48:])
     rejected = torch.where(order[:, None], x[48:], x[:48])
-    rm = L.train_reward_model(sft, chosen, rejected, hw5["reward_model_loss"], steps=60, seed=0, batch=16, lr=3e-3)
+    rm = L.fit_reward_model(sft, chosen, rejected, hw5["reward_model_loss"], steps=60, seed=0, batch=16, lr=3e-3)
     with torch.no_grad():
         s = (torch.cat([rm.score(chosen), rm.score(rejected)]) - rm.shift) / rm.scale
     assert abs(float(s.mean())) < 1e-4 and abs(float(s.std()) - 1) < 1e-4
     assert float((s[:48] > s[48:]).float().mean()) > 0.8, "the fitted model should rank its training pairs"
-    zero = L.train_reward_model(sft, chosen, rejected, lambda c, r: 0.0 * (c - r).sum(), steps=5, seed=0, batch=16)
+    zero = L.fit_reward_model(sft, chosen, rejected, lambda c, r: 0.0 * (c - r).sum(), steps=5, seed=0, batch=16)
     head = float(zero.head.weight.abs().sum() + zero.head.bias.abs().sum())
     assert head == 0.0, "the loop must use the given loss (the zero-initialised head had no gradient to follow)"
 
