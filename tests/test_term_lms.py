@@ -32,6 +32,7 @@ from autograder.outputs.batch_output import PREVIOUS_DIR, read_results
 from autograder.outputs.checkout import checkout_problem, worker_packages
 from autograder.outputs.files import write_gradebook, write_outputs
 from autograder.outputs.formgrader_guard import AUTOGRADE_REFUSED, GENERATE_REFUSED
+from autograder.outputs.text import markdown_text
 from conftest import FIXTURE_COURSE, REPO
 
 POINTS = {"scaled_sum": 3.0, "Counter": 2.0, "mean_of": 1.0, "double_scaled": 1.0}
@@ -199,7 +200,8 @@ def test_roster_names_survive_the_sync_and_formgrader_shows_them(synced):
         assert (alice.first_name, alice.last_name, alice.email, alice.lms_user_id) == (
             "Alice", "Adams", "alice@example.edu", "101")
         assert sorted(s.id for s in gb.students) == ["alice", "bob", "carol", "dave"]
-        assert [s.student.last_name for s in gb.assignment_submissions("fx")]  # what formgrader lists by name
+        listed = sorted((s.student.last_name, s.student.first_name) for s in gb.assignment_submissions("fx"))
+        assert listed == [("=Brown", "Bob"), ("Adams", "Alice"), ("Clark", "Carol")], "formgrader's names, not None"
         with pytest.raises(Exception):
             gb.find_submission("fx", "dave")  # a grader error: the student is known, no submission recorded
     assert gradebook.read_not_recorded(root) == {"fx": {"dave": "sandbox did not start"}}
@@ -298,3 +300,126 @@ def test_a_worker_that_would_import_another_checkout_is_refused_naming_both(tmp_
     (course_copy / "rlcourse" / "__init__.py").write_text("")
     found = {"autograder": here, "rlcourse": REPO / "rlcourse"}
     assert str(course_copy) in checkout_problem(course_copy, found)
+
+
+# ------------------------------------------------------------------ the whole term, end to end
+
+BUGGY_MEAN_TEST = "check_scalar(got, float(np.median(values)))  # a suite bug: the median, not the mean"
+TERM_ROSTER = """id,first_name,last_name,email,lms_user_id,sis_user_id,sis_login_id,section
+alice,Alice,Adams,alice@example.edu,101,S-1,aadams,A
+bob,Bob,Brown,bob@example.edu,102,S-2,bbrown,A
+carol,Carol,Clark,carol@example.edu,103,S-3,cclark,B
+erin,Erin,Evans,erin@example.edu,104,S-4,eevans,B
+"""
+
+
+@pytest.mark.slow
+def test_a_term_in_nbgrader_layout_to_canvas_with_a_roster_a_missing_student_and_late_ones(open_tmp, monkeypatch):
+    """alice hands in everything on time; bob hands in late inside his extension; carol late without one (10% a
+    day begun); erin hands in only the other assignment (ex), so she is missing from fx. The suite marks mean_of
+    against the median; it is fixed after hand grading and the class regraded."""
+    from autograder.core import course
+
+    source = open_tmp / "fixture"
+    shutil.copytree(FIXTURE_COURSE, source, ignore=shutil.ignore_patterns("samples", "__pycache__"))
+    shutil.copy(REPO / "nbgrader_config.py", source / "nbgrader_config.py")
+    suite = source / "autograder" / "suites" / "fx" / "test_fx.py"
+    fixed = suite.read_text()
+    suite.write_text(fixed.replace("check_scalar(got, reference.mean_of(values))", BUGGY_MEAN_TEST))
+    assert suite.read_text() != fixed
+    monkeypatch.setattr(course, "REPO", source)
+    env = {**ENV, "RLCOURSE_REPO": str(source)}
+    root = open_tmp / "course"
+    root.mkdir()
+    (root / "nbgrader_config.py").write_text((REPO / "nbgrader_config.py").read_text()
+                                             + "\nc.LatePenalty.percent = 10.0\nc.LatePenalty.cap_percent = 50.0\n")
+    (root / "roster.csv").write_text(TERM_ROSTER)
+    (root / "extensions.csv").write_text("student_id,assignment,deadline\nbob,fx,2026-03-03 00:00:00 UTC\n")
+    solution = {c.metadata["nbgrader"]["grade_id"]: re.sub(r"\s*### (BEGIN|END) SOLUTION\n?", "\n", c.source)
+                for c in nbformat.read(str(source / "solutions/fx/fx.ipynb"), as_version=4).cells
+                if "nbgrader" in c.metadata}
+    submitted = root / "submitted"
+    for student, stubs, answer, stamp in [
+            ("alice", list(POINTS), "The max cancels in the ratio.", "2026-03-01 20:00:00.000000 UTC"),
+            ("bob", ["scaled_sum"], "Because.", "2026-03-02 22:00:00.000000 UTC"),
+            ("carol", ["scaled_sum", "Counter"], "It cancels.", "2026-03-03 01:00:00.000000 UTC")]:
+        nb = nbformat.read(str(source / "assignments/fx/fx.ipynb"), as_version=4)
+        for cell in nb.cells:
+            gid = cell.metadata.get("nbgrader", {}).get("grade_id")
+            if gid in stubs:
+                cell.source = solution[gid]
+            elif gid == "q_why":
+                cell.source = answer
+        (submitted / student / "fx").mkdir(parents=True)
+        nbformat.write(nb, str(submitted / student / "fx" / "fx.ipynb"))
+        (submitted / student / "fx" / "timestamp.txt").write_text(stamp)
+    (submitted / "erin" / "ex").mkdir(parents=True)
+    shutil.copy(source / "assignments/ex/ex.ipynb", submitted / "erin" / "ex" / "ex.ipynb")
+    for path in [open_tmp, *open_tmp.rglob("*")]:
+        path.chmod(0o777 if path.is_dir() else 0o644)
+    out = open_tmp / "results"
+
+    def cli(*args: str, status: int = 0) -> subprocess.CompletedProcess:
+        done = subprocess.run([sys.executable, "-m", "autograder", *args], env=env, cwd=REPO, capture_output=True,
+                              text=True, timeout=600)
+        assert done.returncode == status, done.stdout[-2000:] + done.stderr[-3000:]
+        return done
+
+    (root / ".nbgrader").mkdir()  # where this configuration keeps the gradebook: nbgrader does not create it
+    nbgrader("db", "student", "import", "roster.csv", cwd=root)
+    shown = cli("batch", "fx", str(root), "--out", str(out)).stdout
+    assert {n: r.score for n, r in read_results(out).items()} == {"alice": 6, "bob": 3, "carol": 5}
+    assert "1 student folder(s) hold no fx/" in shown and "erin" in shown
+    assert "(3 graded, 0 ungradable, 0 not graded because the grader failed)" in shown, shown
+    cli("nbgrader-sync", "fx", str(root), "--results", str(out), "--course", str(root))
+    with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
+        gb.update_or_create_assignment("fx", duedate="2026-03-02 00:00:00 UTC")
+        assert sorted(s.student.id for s in gb.assignment_submissions("fx")) == ["alice", "bob", "carol"]
+        assert gb.find_student("carol").last_name == "Clark", "the roster's names are kept by the sync"
+        waiting = [(g.notebook.assignment.student.id, g.name) for g in gb.db.query(type(gb.find_grade(
+            "q_why", "fx", "fx", "alice"))).all() if g.needs_manual_grade]
+        assert sorted(waiting) == [("alice", "q_why"), ("bob", "q_why"), ("carol", "q_why")], "erin's not in the queue"
+        for student, score in [("alice", 2.0), ("bob", 1.0), ("carol", 1.0)]:  # formgrader's score boxes
+            grade = gb.find_grade("q_why", "fx", "fx", student)
+            grade.manual_score, grade.needs_manual_grade = score, False
+        gb.find_comment("q_why", "fx", "fx", "bob").manual_comment = "Say why it cancels."
+        gb.db.commit()
+
+    suite.write_text(fixed)  # the suite is fixed mid-term
+    csv_before = (out / GRADEBOOK_NAME).read_bytes()
+    refused = cli("regrade", "fx", str(root), "--out", str(out), "--only", "alice", "--course", str(root), status=1)
+    assert "refused, nothing written" in refused.stderr and (out / GRADEBOOK_NAME).read_bytes() == csv_before
+    assert not (out / PREVIOUS_DIR).exists()
+    shown = cli("regrade", "fx", str(root), "--out", str(out), "--course", str(root)).stdout
+    alice_line = next(line for line in shown.splitlines() if line.startswith("alice"))
+    assert "6 → 7" in alice_line and "mean_of 0 → 1" in alice_line and "8 → 9" in alice_line, shown
+    assert {n: r.score for n, r in read_results(out).items()} == {"alice": 7, "bob": 3, "carol": 5}
+
+    shown = cli("export", "--format", "canvas", "--out", str(open_tmp / "canvas.csv"), "--course", str(root)).stdout
+    rows = list(csv.reader((open_tmp / "canvas.csv").open()))
+    assert rows[0] == ["Student", "ID", "SIS User ID", "SIS Login ID", "Section", "fx"]
+    assert rows[1][0].strip() == "Points Possible" and rows[1][5] == "9"
+    assert {r[0]: (r[1], r[5]) for r in rows[2:]} == {
+        "Adams, Alice": ("101", "9"),  # on time: 7 + 2
+        "Brown, Bob": ("102", "4"),  # 22 h late, inside his extension: 3 + 1, no penalty
+        "Clark, Carol": ("103", "4.8"),  # 25 h late, two days begun: (5 + 1) - 20%
+        "Evans, Erin": ("104", "0")}  # handed in no fx
+    assert "fx bob: extension to 2026-03-03 00:00 UTC" in shown and "fx carol: submitted 1 day 1 h late" in shown
+    done = subprocess.run([str(BIN / "nbgrader"), "export", "--to", str(open_tmp / "nb.csv")], cwd=root, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    theirs = {r["student_id"]: float(r["score"]) for r in csv.DictReader((open_tmp / "nb.csv").open())}
+    assert theirs == {"alice": 9, "bob": 4, "carol": pytest.approx(4.8), "erin": 0}
+
+    shown = cli("feedback", "fx", "--results", str(out), "--course", str(root), "--zip", str(open_tmp / "zips"))
+    assert "warning" not in shown.stderr, shown.stderr
+    with zipfile.ZipFile(open_tmp / "zips" / "fx-feedback.zip") as z:
+        assert sorted(z.namelist()) == ["alice/feedback.md", "bob/feedback.md", "carol/feedback.md"]
+        bob = z.read("bob/feedback.md").decode()
+    assert "**Automatic score: 3 / 7**" in bob and "- `q_why`: 1 / 2" in bob and "= 4 / 9**" in bob
+
+    report = cli("class-report", "fx", str(root), "--results", str(out), "--course", str(root)).stdout
+    assert "the grader failed on none" in report
+    md = (out / "_class_report" / "report.md").read_text()
+    assert markdown_text("written: q_why") in md and "maximum 9 points" in md  # the written answer is an item
+    assert "Names are pseudonyms" in md and "alice" not in md and (out / "_pseudonyms.csv").is_file()
