@@ -5,6 +5,7 @@ Prints the Markdown tables that the README shows:
     python bench/bench_hw1_imitation.py                  # everything (about 15 minutes on 2 shared cores)
     python bench/bench_hw1_imitation.py --skip-notebook  # without timing the notebook runs
     python bench/bench_hw1_imitation.py --expert HalfCheetah-v5=experts/HalfCheetah-v5/sac/ckpt_0125000.pt
+    python bench/bench_hw1_imitation.py --drift [--part 0/2]  # the drift protocol below (resumable; parts run side by side)
 
 Every number comes from the reference solutions in ``solutions/hw1_imitation`` (run through the
 grader's own ``build_reference``) on the shipped experts and demonstrations, with the notebook's
@@ -12,11 +13,41 @@ full budgets: learners are two-layer tanh networks with input standardisation, `
 gradient steps of Adam per clone, evaluation on ``EPISODES`` episodes seeded from 1000 (the
 expert is measured on the same episodes), and 3 training seeds. Returns are reported as a
 fraction of the expert's return, mean ± standard deviation over the seeds.
+
+Drift on MuJoCo (``--drift``, written into ``bench/results/hw1_imitation.json`` under ``"drift"``)
+----------------------------------------------------------------------------------------------------
+The protocol below was fixed, and written here and in the notebook, before its 5-seed results were
+run. It is the second design: a one-seed pilot of the first (pushes of 0.1, the notebook's 64×64
+learner) found BC at 0.80 of the expert with 2,390 labels and 0.97 with 6,774, DAgger at 0.93 with
+4,211: too little drift to test, so the learner was made smaller than the expert (a second pilot,
+push 0.1 with a linear and a 16×16 learner, timed the runs and showed BC stuck near 0.5 with 16×16).
+
+- World: ``Hopper-v5`` with pushes (``rlcourse.drift.PushedHopper``): at each step, with probability
+  0.02, the torso's forward, vertical and pitch velocities each get a kick from N(0, 0.1²). 0.1 was
+  set on the expert alone: in a 10-episode calibration it keeps 95% of its calm return at 0.1, 63%
+  at 0.2. Demonstrations, DAgger's rollouts and every evaluation happen in this world.
+- Expert: ``datasets/experts/Hopper-v5/expert.pt`` (256×256 tanh). ``DRIFT_DEMOS`` demonstrations
+  recorded in the pushed world, seeded 100, 101, ...; the expert's return is its mean over the
+  ``DRIFT_EVAL`` evaluation episodes (seeded 1000, 1001, ...; the same pushes for every policy).
+- Settings (three, all reported): the learner's width, 16×16, 32×32 and 64×64 tanh layers, every
+  one smaller than the expert.
+- Learners: behaviour cloning on the first 1, 4 and 12 demonstrations (5,000 gradient steps of Adam,
+  batch 256, lr 1e-3, each a fresh network); DAgger from the one-demonstration clone, 8 iterations
+  of 2 learner episodes (beta = 0), each refitting the learner in place for about 1,000 steps on
+  the aggregate; and behaviour cloning on exactly as many demonstration labels as DAgger ended with
+  (``bc`` beside ``dagger`` in the results, the comparison at the same labels).
+- 5 training seeds; every number is a mean return over the 20 evaluation episodes divided by the
+  expert's; spreads are standard deviations over the seeds.
+- Target (issue 34): in every setting, at the same labels, DAgger >= 0.9, BC <= 0.7, and the gap of
+  the means more than twice the larger of the two spreads. Recorded as measured, met or not.
 """
 from __future__ import annotations
 
 import argparse
 import copy
+import datetime
+import json
+import os
 import subprocess
 import sys
 import time
@@ -25,8 +56,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from autograder.grader import build_reference
-from rlcourse import data, racetrack
+from autograder.core.grader import build_reference
+from rlcourse import data, drift, racetrack
 from rlcourse.imitation import Demonstrations, NormalisedPolicy
 from rlcourse.nets import GaussianPolicy, load_policy
 from rlcourse.rollouts import rollout
@@ -40,6 +71,13 @@ BC_STEPS, HIDDEN, BATCH, LR = 5000, (64, 64), 256, 1e-3      # as in the noteboo
 DAGGER_ITERS, DAGGER_EPISODES, DAGGER_EPOCHS = 10, 2, 4
 RACE_ITERS, RACE_TRAIN = 6, dict(batch_size=64, lr=3e-3)
 EVAL_SEED = 1000
+RESULTS = REPO / "bench" / "results" / "hw1_imitation.json"
+DRIFT_PARTIAL = REPO / "bench" / "results" / "hw1_imitation.drift.partial.json"
+DRIFT_PUSH, DRIFT_DEMOS, DRIFT_EVAL = 0.1, 30, 20   # demos: enough labels for the matched clone
+DRIFT_SETTINGS = {"16x16": (16, 16), "32x32": (32, 32), "64x64": (64, 64)}   # fixed before the results
+DRIFT_SEEDS = (0, 1, 2, 3, 4)
+DRIFT_RUN = dict(bc_demos=(1, 4, 12), bc_steps=5000, dagger_iters=8, dagger_episodes=2, refit_steps=1000,
+                 eval_episodes=DRIFT_EVAL, eval_seed=EVAL_SEED)
 
 
 def frac(values, reference: float) -> str:
@@ -161,6 +199,98 @@ class Bench:
         print()
 
 
+def meta() -> dict:
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO).stdout.strip()
+    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
+            "machine": "2-core CPU"}
+
+
+def drift_runs(part: tuple[int, int]) -> None:
+    """Run this part's (setting, seed) runs of the drift protocol, skipping those already in the partial file."""
+    ns = build_reference("hw1_imitation")
+    expert = data.load_policy("experts/Hopper-v5/expert.pt")
+    env_id = drift.pushed_hopper(DRIFT_PUSH)
+    t = time.time()
+    demos = Demonstrations.from_episodes(rollout(expert.act, env_id, DRIFT_DEMOS, seed=100))
+    expert_returns = rollout(expert.act, env_id, DRIFT_EVAL, EVAL_SEED).returns
+    print(f"pushed world {env_id}: {DRIFT_DEMOS} demos, {len(demos.obs)} labels (lengths {demos.lengths.tolist()}); "
+          f"expert {expert_returns.mean():.0f} ± {expert_returns.std():.0f} over {DRIFT_EVAL} episodes "
+          f"({time.time() - t:.0f} s)", flush=True)
+    jobs = [(name, seed) for name in DRIFT_SETTINGS for seed in DRIFT_SEEDS]
+    index, n_parts = part
+    for j, (name, seed) in enumerate(jobs):
+        if j % n_parts != index or (name, seed) in _done():
+            continue
+        print(f"{name}, seed {seed} (run {j + 1} of {len(jobs)}; about 5 minutes on a shared core):", flush=True)
+        t = time.time()
+        run = drift.drift_run(ns["train_bc"], ns["dagger"], expert, env_id, demos, seed, float(expert_returns.mean()),
+                              hidden=DRIFT_SETTINGS[name], log=lambda line: print(line, flush=True), **DRIFT_RUN)
+        run.update(name=name, wall_s=round(time.time() - t, 1))
+        _append(run, expert_returns)
+
+
+def _done() -> set:
+    if not DRIFT_PARTIAL.exists():
+        return set()
+    return {(r["name"], r["seed"]) for r in json.loads(DRIFT_PARTIAL.read_text())["runs"]}
+
+
+def _append(run: dict, expert_returns: np.ndarray) -> None:
+    """Add one run to the partial file (re-read first: the parts write to it in turn), atomically."""
+    state = json.loads(DRIFT_PARTIAL.read_text()) if DRIFT_PARTIAL.exists() else {"runs": []}
+    state["expert_returns"] = [float(x) for x in expert_returns]
+    state["runs"] = [r for r in state["runs"] if (r["name"], r["seed"]) != (run["name"], run["seed"])] + [run]
+    tmp = DRIFT_PARTIAL.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(state, indent=1))
+    tmp.replace(DRIFT_PARTIAL)
+
+
+def drift_summary() -> dict:
+    """The "drift" object of the results file from the partial file's runs; prints its Markdown table
+    and draws the figure (``bench/results/hw1_imitation_drift.png``)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    state = json.loads(DRIFT_PARTIAL.read_text())
+    settings = []
+    fig, axes = plt.subplots(1, len(DRIFT_SETTINGS), figsize=(5 * len(DRIFT_SETTINGS), 3.8), sharey=True)
+    print("| learner | labels (mean over seeds) | BC, same labels | DAgger | (DAgger - BC) / larger spread | target met |")
+    print("|---|---|---|---|---|---|")
+    for ax, name in zip(np.atleast_1d(axes), DRIFT_SETTINGS):
+        runs = sorted((r for r in state["runs"] if r["name"] == name), key=lambda r: r["seed"])
+        if not runs:
+            continue
+        s = drift.summarise(runs)
+        s["target_met"] = s["target_met"] and len(runs) == len(DRIFT_SEEDS)
+        spread = max(s["bc_std"], s["dagger_std"])
+        settings.append({"name": name, "hidden": list(DRIFT_SETTINGS[name]), "seeds": [r["seed"] for r in runs],
+                         **s, "bc_curve": [r["bc"] for r in runs], "dagger_curve": [r["dagger"] for r in runs],
+                         "wall_s": [r.get("wall_s") for r in runs]})
+        print(f"| {name} | {np.mean(s['labels']):.0f} | {s['bc_mean']:.2f} ± {s['bc_std']:.2f} | "
+              f"{s['dagger_mean']:.2f} ± {s['dagger_std']:.2f} | {(s['dagger_mean'] - s['bc_mean']) / max(spread, 1e-9):.1f} | "
+              f"{'yes' if s['target_met'] else 'no'} |")
+        drift.plot_drift(runs, ax, f"{name} learner, pushes of {DRIFT_PUSH}")
+    fig.tight_layout()
+    fig.savefig(RESULTS.with_name("hw1_imitation_drift.png"), dpi=100)
+    er = np.array(state["expert_returns"])
+    return {"protocol": {"world": f"Hopper-v5, pushes N(0, {DRIFT_PUSH}^2) on qvel[:3] with probability "
+                                  f"{drift.PUSH_RATE} a step", "push": DRIFT_PUSH, "push_rate": drift.PUSH_RATE,
+                         "demos": DRIFT_DEMOS, "eval_episodes": DRIFT_EVAL, "eval_seed": EVAL_SEED,
+                         **{k: (list(v) if isinstance(v, tuple) else v) for k, v in DRIFT_RUN.items()}},
+            "expert_return": {"mean": float(er.mean()), "std": float(er.std()), "per_episode": er.round(1).tolist()},
+            "settings": settings,
+            "target": "in every setting, at the same labels: DAgger >= 0.9, BC <= 0.7, gap > 2 x larger spread; 5 seeds"}
+
+
+def write_drift() -> None:
+    results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    results["drift"] = drift_summary()
+    results["meta"] = meta()
+    RESULTS.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {RESULTS.relative_to(REPO)}")
+
+
 def time_notebook(fast: bool) -> tuple[float, str]:
     start = time.time()
     proc = subprocess.run([sys.executable, "-m", "autograder", "run", str(NOTEBOOK), "-p", f"FAST={fast}",
@@ -176,8 +306,16 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes per learner (the notebook's 5)")
     parser.add_argument("--expert", nargs="*", default=[], metavar="ENV=FILE",
                         help="use another expert file (relative to datasets/) for an environment")
+    parser.add_argument("--drift", action="store_true", help="run the drift protocol (resumable) and record it")
+    parser.add_argument("--part", default="0/1", help="with --drift: run only part I of N of the runs (I/N)")
+    parser.add_argument("--summary", action="store_true", help="with --drift: only write the results of finished runs")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.drift:
+        if not args.summary:
+            drift_runs(tuple(int(x) for x in args.part.split("/")))
+        write_drift()
+        return
     experts = {env: f"experts/{env}/expert.pt" for env in ENVS}
     experts.update(dict(item.split("=", 1) for item in args.expert))
     if not args.skip_learners:

@@ -1,0 +1,188 @@
+"""Hopper with pushes: the MuJoCo world in which hw1 looks for compounding error.
+
+On the calm ``Hopper-v5`` a two-layer clone of a few expert episodes hops as well as the expert: the
+expert's states form a thin tube, the clone's errors are small enough to keep it inside, and nothing
+ever shows it the rest of the state space. :class:`PushedHopper` knocks the robot out of that tube.
+At every step, with probability ``PUSH_RATE``, the torso's three velocities (forward, vertical and
+pitch, ``qvel[:3]``) get a kick drawn from ``N(0, push**2)`` independently, in m/s and rad/s. The
+pushes come from the environment's own generator, seeded by ``reset(seed=...)``, so a seeded
+episode meets the same pushes whoever acts in it (the expert and every learner are evaluated on
+the same pushes).
+
+:func:`pushed_hopper` registers one gymnasium id per push size (``rlcourse/PushedHopper-p0.50-v0``
+for 0.5), because :func:`rlcourse.rollouts.rollout` and hw1's ``dagger`` take an environment id.
+"""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.envs.mujoco.hopper_v5 import HopperEnv
+
+PUSH_RATE = 0.02
+"""Probability of a push at each step: one push every 50 steps (0.4 s of simulated time) on average."""
+
+
+class PushedHopper(gym.Wrapper):
+    """``Hopper-v5`` whose torso is kicked now and then: see the module's docstring.
+
+    ``n_pushes`` counts the pushes of the current episode.
+    """
+
+    def __init__(self, push: float, rate: float = PUSH_RATE, **hopper_kwargs) -> None:
+        if push < 0 or not 0 <= rate <= 1:
+            raise ValueError(f"need push >= 0 and 0 <= rate <= 1, got push={push}, rate={rate}")
+        super().__init__(HopperEnv(**hopper_kwargs))  # registration adds the 1,000-step TimeLimit
+        self.push, self.rate = float(push), float(rate)
+        self.rng = np.random.default_rng()
+        self.n_pushes = 0
+
+    def reset(self, *, seed: int | None = None, options=None):
+        if seed is not None:
+            self.rng = np.random.default_rng([seed, 7919])  # its own stream, apart from the reset noise's
+        self.n_pushes = 0
+        return self.env.reset(seed=seed, options=options)
+
+    def step(self, action):
+        if self.push > 0 and self.rng.random() < self.rate:
+            data = self.env.unwrapped.data
+            data.qvel[:3] += self.rng.normal(0.0, self.push, size=3)
+            self.n_pushes += 1
+        return self.env.step(action)
+
+
+def pushed_hopper(push: float) -> str:
+    """The gymnasium id of Hopper with pushes of size ``push`` (registered on first use)."""
+    env_id = f"rlcourse/PushedHopper-p{push:.2f}-v0"
+    if env_id not in gym.registry:
+        gym.register(env_id, entry_point=PushedHopper, max_episode_steps=1000, kwargs={"push": float(push)})
+    return env_id
+
+
+# ---------------------------------------------------------------------------------------------------
+# The protocol's pieces, shared by the notebook and bench/bench_hw1_imitation.py. They take the
+# student's (or the reference's) train_bc and dagger as arguments.
+# ---------------------------------------------------------------------------------------------------
+
+def fit_clone(train_bc, obs: np.ndarray, actions: np.ndarray, seed: int, steps: int, hidden=(64, 64),
+              batch_size: int = 256, lr: float = 1e-3, stats: tuple[np.ndarray, np.ndarray] | None = None):
+    """A fresh :class:`~rlcourse.imitation.NormalisedPolicy` fitted by ``train_bc`` for about ``steps``
+    gradient steps on ``(obs, actions)`` (standardised with ``stats`` or the data's own statistics)."""
+    import torch
+
+    from rlcourse.imitation import NormalisedPolicy
+
+    torch.manual_seed(seed)
+    mean, std = stats if stats is not None else (obs.mean(axis=0), obs.std(axis=0))
+    policy = NormalisedPolicy(mean, std, actions.shape[1], hidden=hidden)
+    train_bc(policy, obs, actions, n_epochs=epochs_for(steps, len(obs), batch_size), batch_size=batch_size,
+             lr=lr, seed=seed)
+    return policy
+
+
+def epochs_for(steps: int, n_pairs: int, batch_size: int = 256, val_fraction: float = 0.1) -> int:
+    """Epochs that give at least ``steps`` minibatch steps on ``n_pairs`` pairs (a tenth held out)."""
+    per_epoch = max(1, int(np.ceil((n_pairs - round(val_fraction * n_pairs)) / batch_size)))
+    return max(1, int(np.ceil(steps / per_epoch)))
+
+
+def expert_fraction(policy, expert_return: float, env_id: str, n_episodes: int, seed: int) -> float:
+    """The policy's mean return over ``n_episodes`` seeded episodes, as a fraction of ``expert_return``."""
+    from rlcourse.rollouts import rollout
+
+    return float(rollout(policy.act, env_id, n_episodes, seed).returns.mean()) / expert_return
+
+
+def drift_run(train_bc, dagger, expert, env_id: str, demos, seed: int, expert_return: float, *,
+              hidden=(16, 16), bc_demos=(1, 4, 12), bc_steps: int = 5000, dagger_iters: int = 8,
+              dagger_episodes: int = 2, refit_steps: int = 1000, eval_episodes: int = 20, eval_seed: int = 1000,
+              batch_size: int = 256, lr: float = 1e-3, log=print) -> dict:
+    """One training seed of hw1's drift protocol in one world (``env_id``); every fraction is of ``expert_return``.
+
+    - behaviour cloning on the first ``k`` demonstrations for each ``k`` in ``bc_demos`` (``bc_steps``
+      gradient steps each, a fresh learner of width ``hidden``, standardised with its own data);
+    - DAgger from the one-demonstration clone: ``dagger_iters`` calls of ``dagger`` for one iteration
+      each (beta = 0, ``dagger_episodes`` learner episodes, seeded ``10_000 + 100 * seed + i *
+      dagger_episodes``), refitting the learner in place for about ``refit_steps`` gradient steps;
+      the learner is evaluated after every iteration;
+    - behaviour cloning on exactly as many labels as DAgger finished with: the first pairs of the
+      demonstrations (whole episodes, then part of the next).
+
+    Returns ``{"seed", "bc": [[labels, fraction], ...], "dagger": [[labels, fraction], ...]`` (the first
+    DAgger point is the one-demonstration clone it starts from), ``"labels"`` (DAgger's final count),
+    ``"bc_matched"``, ``"dagger_final"``}. ``log`` gets one line per finished fit.
+    """
+    import copy
+    import time
+
+    start = time.perf_counter()
+    score = lambda policy: expert_fraction(policy, expert_return, env_id, eval_episodes, eval_seed)  # noqa: E731
+    fit = lambda d_obs, d_act, stats=None: fit_clone(train_bc, d_obs, d_act, seed, bc_steps, hidden,  # noqa: E731
+                                                     batch_size, lr, stats)
+    out = {"seed": seed, "bc": [], "dagger": []}
+    clones = {}
+    for k in bc_demos:
+        d = demos.first(k)
+        clones[k] = fit(d.obs, d.actions)
+        out["bc"].append([int(len(d.obs)), score(clones[k])])
+        log(f"  seed {seed}: BC on {k} demos ({len(d.obs)} labels): {out['bc'][-1][1]:.2f} of the expert "
+            f"({time.perf_counter() - start:.0f} s)")
+    first = demos.first(bc_demos[0])
+    learner, obs, actions = copy.deepcopy(clones[bc_demos[0]]), first.obs, first.actions
+    out["dagger"].append([int(len(obs)), out["bc"][0][1]])
+    for i in range(dagger_iters):
+        learner, hist = dagger(env_id, expert, learner, 1, [0.0], obs, actions, episodes_per_iter=dagger_episodes,
+                               seed=10_000 + 100 * seed + i * dagger_episodes,
+                               n_epochs=epochs_for(refit_steps, len(obs), batch_size), batch_size=batch_size, lr=lr)
+        obs, actions = hist["obs"], hist["actions"]
+        out["dagger"].append([int(len(obs)), score(learner)])
+        log(f"  seed {seed}: DAgger iteration {i + 1} ({len(obs)} labels): {out['dagger'][-1][1]:.2f} of the expert "
+            f"({time.perf_counter() - start:.0f} s)")
+    n, m = len(obs), min(len(obs), len(demos.obs))  # m < n only when too few demonstrations were recorded
+    matched = fit(demos.obs[:m], demos.actions[:m])
+    out.update(labels=int(n), bc_labels=int(m), bc_matched=score(matched), dagger_final=out["dagger"][-1][1])
+    log(f"  seed {seed}: BC on the same {m} labels: {out['bc_matched']:.2f}; DAgger {out['dagger_final']:.2f} "
+        f"({time.perf_counter() - start:.0f} s)")
+    return out
+
+
+def summarise(runs: list[dict]) -> dict:
+    """The comparison at the same labels over the seeds of one setting's :func:`drift_run` results.
+
+    Returns ``{"labels", "bc", "dagger"}`` (per-seed lists, seeds in the order given), their means and
+    standard deviations (``bc_mean``, ``bc_std``, ``dagger_mean``, ``dagger_std``), and ``target_met``:
+    DAgger >= 0.9, BC <= 0.7 and a gap of the means over twice the larger spread (issue 34's bar).
+    """
+    bc = np.array([r["bc_matched"] for r in runs], dtype=float)
+    dg = np.array([r["dagger_final"] for r in runs], dtype=float)
+    spread = max(bc.std(), dg.std())
+    return {"labels": [int(r["labels"]) for r in runs], "bc": bc.round(4).tolist(), "dagger": dg.round(4).tolist(),
+            "bc_mean": float(bc.mean()), "bc_std": float(bc.std()), "dagger_mean": float(dg.mean()),
+            "dagger_std": float(dg.std()),
+            "target_met": bool(dg.mean() >= 0.9 and bc.mean() <= 0.7 and dg.mean() - bc.mean() > 2 * spread)}
+
+
+def plot_drift(runs: list[dict], ax, title: str = "") -> None:
+    """Fraction of the expert against expert labels for one setting's runs: the behaviour-cloning
+    curve (mean and one standard deviation over seeds), DAgger by iteration (labels averaged over
+    seeds) and the clone on DAgger's final number of labels."""
+    bc = np.array([[f for _, f in r["bc"]] for r in runs])
+    bc_x = np.mean([[n for n, _ in r["bc"]] for r in runs], axis=0)
+    dg = np.array([[f for _, f in r["dagger"]] for r in runs])
+    dg_x = np.mean([[n for n, _ in r["dagger"]] for r in runs], axis=0)
+    for name, x, y, color, marker in (("behaviour cloning", bc_x, bc, "tab:red", "o"),
+                                      ("DAgger", dg_x, dg, "tab:blue", ".")):
+        mean, std = y.mean(axis=0), y.std(axis=0)
+        ax.plot(x, mean, color=color, marker=marker, label=f"{name} ({len(runs)} seeds)")
+        ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.2)
+    s = summarise(runs)
+    ax.errorbar([np.mean(s["labels"])], [s["bc_mean"]], yerr=[s["bc_std"]], color="tab:red", marker="s",
+                linestyle="none", capsize=3, label="BC on DAgger's final labels")
+    ax.axhline(1.0, linestyle="--", color="grey", linewidth=1)
+    ax.set_xscale("log")
+    ax.set_xlabel("expert labels")
+    ax.set_ylabel("return / expert's")
+    ax.set_ylim(0, 1.25)
+    ax.grid(alpha=0.3)
+    ax.legend(frameon=False, fontsize=8)
+    if title:
+        ax.set_title(title)

@@ -1,0 +1,125 @@
+"""hw1's drift protocol: the pushed Hopper, the comparison's bookkeeping, the results file, the lecture links."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from rlcourse import drift
+
+REPO = Path(__file__).resolve().parents[1]
+NOTEBOOKS = [REPO / "solutions/hw1_imitation/hw1_imitation.ipynb", REPO / "assignments/hw1_imitation/hw1_imitation.ipynb"]
+RESULTS = REPO / "bench/results/hw1_imitation.json"
+
+
+def _trajectory(env, seed: int, steps: int = 200) -> np.ndarray:
+    """Observations of ``env`` (an id or an environment) under a fixed sequence of random actions."""
+    env = gym.make(env) if isinstance(env, str) else env
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    states = [obs]
+    for _ in range(steps):
+        obs, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, size=3).astype(np.float32))
+        states.append(obs)
+        if terminated or truncated:
+            break
+    env.close()
+    return np.array(states)
+
+
+def _pushes(push: float, seed: int, steps: int) -> int:
+    env = drift.PushedHopper(push)
+    env.reset(seed=seed)
+    for _ in range(steps):  # the count does not depend on whether the hopper is still up
+        env.step(np.zeros(3, dtype=np.float32))
+    return env.n_pushes
+
+
+def test_no_pushes_is_the_calm_hopper():
+    calm = _trajectory("Hopper-v5", seed=3)
+    same = _trajectory(drift.pushed_hopper(0.0), seed=3)
+    assert calm.shape == same.shape and np.allclose(calm, same)
+
+
+def test_pushes_are_seeded_and_change_the_motion():
+    a, b, c = (_trajectory(drift.PushedHopper(0.5, rate=1.0), seed) for seed in (4, 4, 5))
+    calm, other = _trajectory("Hopper-v5", seed=4), _trajectory("Hopper-v5", seed=5)
+    assert a.shape == b.shape and np.allclose(a, b), "the same seed must give the same pushes"
+    n = min(len(a), len(calm), 5)
+    assert not np.allclose(a[1:n], calm[1:n]), "a push of 0.5 at every step should change the motion at once"
+    m = min(len(c), len(other), 5)
+    assert not np.allclose(c[1:m] - other[1:m], a[1:m] - calm[1:m]), "another seed, other pushes"
+
+
+def test_push_rate():
+    counts = [_pushes(0.01, seed, 1000) for seed in range(3)]
+    assert all(5 <= c <= 45 for c in counts), f"about 20 pushes in 1,000 steps at rate 0.02, got {counts}"
+
+
+def test_ids_and_bad_arguments():
+    assert drift.pushed_hopper(0.1) == "rlcourse/PushedHopper-p0.10-v0" == drift.pushed_hopper(0.1)
+    with pytest.raises(ValueError):
+        drift.PushedHopper(-1.0)
+
+
+def test_epochs_for():
+    assert drift.epochs_for(1000, 2560, 256) == 112   # 2,304 training pairs: 9 minibatches an epoch
+    assert drift.epochs_for(5, 100_000, 256) == 1
+    assert drift.epochs_for(10, 1, 256) == 10
+
+
+def _runs(bc, dagger, labels=5000):
+    return [{"labels": labels, "bc_matched": b, "dagger_final": d} for b, d in zip(bc, dagger)]
+
+
+def test_summarise_applies_the_bar():
+    met = drift.summarise(_runs([0.5, 0.55, 0.45, 0.5, 0.5], [0.95, 0.92, 0.98, 0.94, 0.96]))
+    assert met["target_met"] and met["bc"] == [0.5, 0.55, 0.45, 0.5, 0.5]
+    assert np.isclose(met["dagger_mean"], 0.95)
+    assert not drift.summarise(_runs([0.75] * 5, [0.95] * 5))["target_met"], "BC above 0.7"
+    assert not drift.summarise(_runs([0.5] * 5, [0.85] * 5))["target_met"], "DAgger below 0.9"
+    wide = drift.summarise(_runs([0.1, 0.9, 0.1, 0.9, 0.5], [0.95] * 5))
+    assert wide["bc_mean"] <= 0.7 and not wide["target_met"], "a gap within twice the spread is not drift"
+
+
+def test_results_file_is_consistent():
+    if not RESULTS.exists() or "drift" not in json.loads(RESULTS.read_text()):
+        pytest.skip("no drift results recorded yet")
+    results = json.loads(RESULTS.read_text())
+    assert {"commit", "date", "load", "machine"} <= set(results["meta"])
+    for setting in results["drift"]["settings"]:
+        n = len(setting["seeds"])
+        assert len(setting["bc"]) == len(setting["dagger"]) == len(setting["labels"]) == n
+        again = drift.summarise(_runs(setting["bc"], setting["dagger"]))
+        assert np.isclose(again["bc_mean"], setting["bc_mean"]) and np.isclose(again["dagger_mean"], setting["dagger_mean"])
+        assert setting["target_met"] == (again["target_met"] and n == 5), setting["name"]
+        for curve in setting["dagger_curve"] + setting["bc_curve"]:
+            labels = [x for x, _ in curve]
+            assert labels == sorted(labels), "labels grow along a curve"
+
+
+def jupyterlab_heading_ids(markdown: str) -> set[str]:
+    """The ids JupyterLab gives a Markdown file's headings: the heading's text with spaces made '-'."""
+    ids, fenced = set(), False
+    for line in markdown.splitlines():
+        if line.lstrip().startswith(("```", "~~~")):
+            fenced = not fenced
+        m = re.match(r"^#{1,6} +(.*?) *#* *$", line)
+        if m and not fenced:
+            ids.add(m.group(1).replace(" ", "-"))
+    return ids
+
+
+@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.parent.parent.name)
+def test_lecture_links_resolve_in_jupyterlab(notebook):
+    text = "".join("".join(c["source"]) for c in json.loads(notebook.read_text())["cells"] if c["cell_type"] == "markdown")
+    links = re.findall(r"\]\((\.\./\.\./lectures/[^)#]+)#([^)]+)\)", text)
+    assert len(links) >= 6, "every stub links the lecture section it implements"
+    for path, anchor in links:
+        target = (notebook.parent / path).resolve()
+        assert target.is_file(), f"{path} does not exist"
+        assert anchor in jupyterlab_heading_ids(target.read_text()), f"{path}#{anchor}: no heading with that JupyterLab id"
