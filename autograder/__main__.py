@@ -32,8 +32,10 @@ def _cmd_grade(args: argparse.Namespace) -> int:
     from autograder.outputs.terminal import summary_lines
     from autograder.outputs.files import write_outputs
     from autograder.core.results import GraderError
+    from autograder.outputs.checkout import require_one_checkout
 
     course.check_assignment(args.assignment)
+    require_one_checkout()
     entry = None
     if args.notebook.is_dir() and not args.notebook.is_symlink():  # a submission folder: pick as batch would
         notebooks, skipped = notebooks_in(args.notebook)
@@ -88,9 +90,11 @@ def _warn_isolation(level: str) -> None:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from autograder.core.batch import Shard, missing_submissions
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
+    from autograder.outputs.checkout import require_one_checkout
     from autograder.outputs.files import grade_folder
     from autograder.outputs.text import plain
 
+    require_one_checkout()
     try:
         shard = Shard.parse(args.shard) if args.shard else Shard()
     except ValueError as err:

@@ -112,6 +112,23 @@ CASES = {
         def scaled_sum(x):
             return {RIGHT} if FOUND else None
         """,
+    "forked_children_hold_memory_together": """
+        import os, time
+        def scaled_sum(x):
+            for _ in range(6):
+                if os.fork() == 0:
+                    held = bytearray(450 * 2**20)
+                    time.sleep(30)
+                    os._exit(0)
+            time.sleep(5)
+            return {RIGHT}
+        """,
+    "stand_in_asked_again_and_again": {"double_scaled": """
+        def double_scaled(x):
+            for _ in range(100_000):
+                scaled_sum(x)
+            return 2 * scaled_sum(x)
+        """},
     "network": """
         import socket
         def scaled_sum(x):

@@ -17,6 +17,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from autograder.sandbox.config import safe_environment
+
 _FIND = ("import importlib.util, json\n"
          "out = {}\n"
          "for name in ('autograder', 'rlcourse'):\n"
@@ -29,7 +31,8 @@ _FIND = ("import importlib.util, json\n"
 def worker_packages() -> dict[str, Path | None]:
     """Where an interpreter started as the sandbox's workers are (this executable, this environment, from ``/``)
     finds the ``autograder`` and ``rlcourse`` packages (found, not imported)."""
-    done = subprocess.run([sys.executable, "-c", _FIND], cwd="/", env=dict(os.environ), capture_output=True,
+    done = subprocess.run([sys.executable, "-c", _FIND], cwd="/", env=safe_environment(dict(os.environ)),
+                          capture_output=True,
                           text=True, timeout=60)
     if done.returncode != 0:
         raise SystemExit(f"cannot tell where the sandbox imports the grader from:\n{done.stderr[-1000:]}")

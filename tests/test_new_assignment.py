@@ -1,0 +1,58 @@
+"""``python -m autograder new ID`` makes an assignment the whole kit accepts (issue 33): in a copy of the
+course, the new skeleton passes the fast tests and its own slow ones (its notebook runs, its samples grade
+as their expected.json says, its trivial answers earn nothing)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO
+
+pytestmark = pytest.mark.slow
+
+NEW = "hw9_example"
+LEFT_OUT = (".venv", ".git", "build", "lectures/_build", "__pycache__", ".pytest_cache")
+
+
+def _copy_course(target: Path) -> None:
+    """The working tree (what a contributor has), without the environment, history and build outputs."""
+    def keep(info: tarfile.TarInfo) -> tarfile.TarInfo | None:
+        parts = Path(info.name).parts[1:]
+        return None if any("/".join(parts).startswith(x) or x in parts for x in LEFT_OUT) else info
+
+    archive = target.parent / "course.tar"
+    with tarfile.open(archive, "w") as tar:
+        tar.add(REPO, arcname="course", filter=keep)
+    with tarfile.open(archive) as tar:
+        tar.extractall(target.parent, filter="tar")
+    (target.parent / "course").rename(target)
+    archive.unlink()
+
+
+def test_new_writes_an_assignment_that_passes(tmp_path):
+    copy = tmp_path / "course copy"
+    _copy_course(copy)
+    env = {**os.environ, "PYTHONPATH": str(copy), "RLCOURSE_REPO": str(copy),
+           "PATH": f"{Path(sys.executable).parent}:{os.environ.get('PATH', '')}"}
+    done = subprocess.run([sys.executable, "-m", "autograder", "new", NEW, "--title", "an example"], cwd=copy,
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    for path in (f"solutions/{NEW}/{NEW}.ipynb", f"assignments/{NEW}/{NEW}.ipynb", f"autograder/suites/{NEW}",
+                 f"autograder/samples/{NEW}/expected.json", f"autograder/suites/{NEW}/trivial_answers.py"):
+        assert (copy / path).exists(), path
+    again = subprocess.run([sys.executable, "-m", "autograder", "new", NEW], cwd=copy, env=env,
+                           capture_output=True, text=True, timeout=600)
+    assert again.returncode != 0 and "never overwrites" in again.stderr
+    own = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", NEW, "tests"],
+                         cwd=copy, env=env, capture_output=True, text=True, timeout=1800)
+    assert own.returncode == 0, own.stdout[-4000:]
+    summary = own.stdout.strip().splitlines()[-1]
+    assert int(summary.split(" passed")[0].split()[-1]) >= 4, f"the new assignment's own tests did not run: {summary}"
+    fast = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "not slow", "-x",
+                           "tests"], cwd=copy, env=env, capture_output=True, text=True, timeout=1800)
+    assert fast.returncode == 0, fast.stdout[-4000:]
