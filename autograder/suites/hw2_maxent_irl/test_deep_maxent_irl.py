@@ -42,6 +42,17 @@ def _ratio(reference, world, reward):
     return expected_return(policy) - expected_return(world.expert_policy())
 
 
+def _loglik_and_gap(reference, world, demos, reward):
+    """At ``reward``, computed on the grader's side: the demonstrations' mean log-likelihood under its soft policy,
+    and the visitation gap |D_expert - D_model|_2 (what the history's entries record)."""
+    policy = reference.soft_value_iteration(world.P, np.asarray(reward, dtype=float), world.horizon)
+    states, actions = np.asarray(demos.states), np.asarray(demos.actions)
+    loglik = float(np.log(policy[np.arange(world.horizon), states, actions]).sum(axis=1).mean())
+    expert = np.bincount(states.ravel(), minlength=world.n_states) / states.shape[0]
+    model = reference.state_visitation_frequency(world.P, policy, world.p0, world.horizon)
+    return loglik, float(np.linalg.norm(expert - model))
+
+
 @stub("deep_maxent_irl", points=1, hint=HINT)
 def test_shapes_and_history(student, reference):
     """reward of shape (S,), one history entry per iteration, and the reward is the network's"""
@@ -73,7 +84,7 @@ def test_shapes_and_history(student, reference):
 def test_history_values(student, reference):
     """The first entries of both histories are those of the initial network, and the log-likelihood rises"""
     world, args = _world_and_args()
-    _, hist = student.deep_maxent_irl(*args, n_iters=30)
+    reward, hist = student.deep_maxent_irl(*args, n_iters=30)
     _, want = reference.deep_maxent_irl(*args, n_iters=30)
     assert isinstance(hist, dict) and {"grad_norm", "log_likelihood"} <= set(hist), \
         "the history should be a dict with keys 'grad_norm' and 'log_likelihood'"
@@ -91,23 +102,31 @@ def test_history_values(student, reference):
             assert False, f"history['{key}'][0], at the initial network, is {scale}: it should be {what}"
     ll = np.asarray(hist["log_likelihood"], dtype=float)
     assert ll[-1] > ll[0], "the log-likelihood should rise over the iterations"
+    assert isinstance(reward, np.ndarray) and reward.shape == (world.n_states,) and np.isfinite(reward).all(), \
+        f"the reward should be a finite numpy array of shape (S,) = ({world.n_states},), got {np.shape(reward)}"
+    reached, _ = _loglik_and_gap(reference, world, _world()[1], reward)
+    assert reached > float(want["log_likelihood"][0]), ("the demonstrations' log-likelihood under the returned reward "
+                                                        "(computed by the grader) is no higher than at the initial "
+                                                        "network: return the trained network's reward")
 
 
 @stub("deep_maxent_irl", points=2, hint=HINT)
 def test_learns_as_well_as_reference(student, reference):
     """After 150 iterations the learned reward's soft policy earns about what the reference's does"""
     world, args = _world_and_args()
-    got, hist = student.deep_maxent_irl(*args, n_iters=150)
+    got, _ = student.deep_maxent_irl(*args, n_iters=150)
     got = np.asarray(got, dtype=float) if isinstance(got, np.ndarray) else got
     assert isinstance(got, np.ndarray) and got.shape == (world.n_states,) and np.isfinite(got).all(), (
         f"the reward should be a finite numpy array of shape (S,) = ({world.n_states},), got {np.shape(got)}")  # before the reference sees it
-    want, _ = reference.deep_maxent_irl(*args, n_iters=150)
+    want, want_hist = reference.deep_maxent_irl(*args, n_iters=150)
     gap_got, gap_want = _ratio(reference, world, got), _ratio(reference, world, want)
     short = gap_want - gap_got
     assert short <= 0.15 * world.horizon, (
         f"the soft policy of the learned reward earns less than the reference's by more than the allowed 0.15 x horizon "
         f"(a shortfall of the order of {10.0 ** np.floor(np.log10(short)):g} in true return)")
-    assert np.asarray(hist["grad_norm"])[-10:].mean() < np.asarray(hist["grad_norm"])[0], "the visitation gap should shrink"
+    _, gap = _loglik_and_gap(reference, world, _world()[1], got)        # the initial network's gap: the reference's
+    assert gap < float(want_hist["grad_norm"][0]), ("the visitation gap |D_expert - D_model| at the returned reward "
+                                                    "(computed by the grader) is no smaller than at the initial network")
 
 
 @stub("deep_maxent_irl", points=1, hint="The gradient with respect to r(s) is exactly D_expert(s) - D_model(s): back-propagate "

@@ -1,12 +1,13 @@
 """Hidden tests of fit_route_weights."""
 import numpy as np
+import torch
 
 from autograder.suite import stub
 from rlcourse.roads import load_network, load_routes
 
 HINT = ("mu_D = mean route features; maximise w . mu_D - mean(route_log_partition(w, ...)) from w = 0 with "
         "torch.optim.LBFGS(line_search_fn='strong_wolfe'); return (w as a numpy array, history).")
-NET = "RoadNetwork(xy=xy, tail=tail, head=head, road_class=road_class, toll=toll)"
+NETWORK = "rlcourse.roads.RoadNetwork"
 _CACHE = {}
 
 
@@ -19,16 +20,17 @@ def _data(rng_seed=0, n=60):
     return _CACHE[n]
 
 
-def _arrays(net):
-    return dict(xy=net.xy, tail=net.tail, head=net.head, road_class=net.road_class, toll=net.toll)
+def _network(ns, net):
+    """The road network ``net``, rebuilt from its arrays with the release's RoadNetwork on that side (a handle)."""
+    return ns.helpers.build(NETWORK, xy=net.xy, tail=net.tail, head=net.head, road_class=net.road_class, toll=net.toll)
 
 
 def _loglik_and_gradient(reference, net, w, feats, origins, destinations, horizon):
     """The mean log-likelihood at w and the model's expected features there (reference, trusted side)."""
-    expr = (f"[(lz := route_log_partition((wt := torch.tensor(w, requires_grad=True)), {NET}, origins, "
-            "destinations, horizon).mean()).item(), torch.autograd.grad(lz, wt)[0].numpy()]")
-    mean_log_z, expected = reference.eval(expr, w=np.asarray(w, dtype=float), origins=origins,
-                                          destinations=destinations, horizon=horizon, **_arrays(net))
+    args = [torch.tensor(np.asarray(w, dtype=float)), _network(reference, net), origins, destinations, horizon]
+    log_z, (grad,) = reference.helpers.value_and_grad("route_log_partition", args, wrt=[0],
+                                                      grad_outputs=torch.full((len(origins),), 1 / len(origins)))
+    mean_log_z, expected = float(log_z.mean()), grad.numpy()
     return float(feats.mean(axis=0) @ w - mean_log_z), np.asarray(expected)
 
 
@@ -39,8 +41,7 @@ def _magnitude(x):
 
 
 def _call(client, net, feats, origins, destinations, horizon):
-    return client.eval(f"fit_route_weights({NET}, feats, origins, destinations, horizon, n_iters=60)",
-                       feats=feats, origins=origins, destinations=destinations, horizon=horizon, **_arrays(net))
+    return client.fit_route_weights(_network(client, net), feats, origins, destinations, horizon, n_iters=60)
 
 
 @stub("fit_route_weights", points=2, hint=HINT)
@@ -63,7 +64,7 @@ def test_reaches_the_maximum_likelihood(student, reference):
 def test_history_rises(student, reference):
     """The recorded log-likelihood starts at its value at w = 0 and ends higher"""
     net, feats, origins, destinations = _data(n=20)
-    _, hist = _call(student, net, feats, origins, destinations, 30)
+    w, hist = _call(student, net, feats, origins, destinations, 30)
     hist = np.asarray(hist, dtype=float)
     assert hist.ndim == 1 and hist.size >= 2, f"the history should be a 1-D array of log-likelihoods, got shape {hist.shape}"
     at_zero, _ = _loglik_and_gradient(reference, net, np.zeros(feats.shape[1]), feats, origins, destinations, 30)
@@ -71,3 +72,9 @@ def test_history_rises(student, reference):
         f"the first entry should be the mean log-likelihood per trip at w = 0; yours is {_magnitude(hist[0] - at_zero)} "
         f"{'above' if hist[0] > at_zero else 'below'} it (record before the first step, and average over trips)")
     assert hist[-1] > hist[0], "the recorded log-likelihood should end higher than it starts"
+    w = np.asarray(w, dtype=float)
+    assert w.shape == (feats.shape[1],), f"the weights should have shape (F,) = ({feats.shape[1]},), got {w.shape}"
+    reached, _ = _loglik_and_gradient(reference, net, w, feats, origins, destinations, 30)
+    assert reached > at_zero + 0.1 * (hist[-1] - hist[0]), (
+        "the mean log-likelihood at the returned weights (computed by the grader) is not above its value at w = 0 "
+        "by the rise the history records: return the weights the optimiser reached")
