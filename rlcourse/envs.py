@@ -10,6 +10,8 @@ from typing import Callable, Optional
 
 import gymnasium as gym
 
+import rlcourse.mujoco_messages  # noqa: F401 - installs the handler that drops a warning students cannot act on
+
 HOPPER = "Hopper-v5"
 """The MuJoCo task of hw4 (PPO, RLHF and DPO)."""
 

@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import gymnasium as gym
+
+import rlcourse.mujoco_messages  # noqa: F401 - installs the handler that drops a warning students cannot act on
 import numpy as np
 
 EGL_PACKAGES = ["libegl1", "libegl-mesa0", "libgl1-mesa-dri", "libgles2"]
