@@ -1,4 +1,5 @@
-"""The figures of the lecture chapter `lectures/01b_multimodal.md`, from closed forms (no training):
+"""The figures of the lecture chapter `lectures/01b_multimodal.md`, from closed forms (no training) and, for
+`multimodal_averaging.png`, from the benchmark's recorded results (`bench/results/hw1b_multimodal.json`):
 
     python bench/figures_hw1b_multimodal.py      # writes lectures/figures/multimodal_*.png
 
@@ -19,6 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "lectures" / "figures"
+RESULTS = Path(__file__).resolve().parent / "results" / "hw1b_multimodal.json"
 WEIGHTS, MEANS, SCALE = np.array([0.5, 0.5]), np.array([-1.0, 1.0]), 0.15   # the two demonstrated modes
 
 
@@ -91,11 +93,41 @@ def euler_figure(path: Path) -> None:
     plt.tight_layout(); fig.savefig(path, dpi=110); plt.close(fig)
 
 
+def averaging_figure(path: Path) -> None:
+    """Success per setting of the averaging protocol: one dot per training seed, a bar at the mean."""
+    import json
+
+    record = json.loads(RESULTS.read_text())
+    settings = record["averaging"]["settings"]
+    followup = {s["name"]: s for s in record.get("averaging_followup", {}).get("settings", [])}
+    policies = [("l2", "L2, H=k=8", "tab:red"), ("mixture", "mixture, H=k=8", "tab:purple"),
+                ("flow", "flow, H=k=8", "tab:green"), ("flow_12k", "flow, H=k=8, 4x steps (follow-up)", "tab:olive"),
+                ("l2_one_step", "L2, one step", "tab:grey")]
+    fig, ax = plt.subplots(figsize=(9, 3.6))
+    width = 0.8 / len(policies)
+    for j, (key, label, colour) in enumerate(policies):
+        for i, s in enumerate(settings):
+            values = followup.get(s["name"], {}).get(key) if key == "flow_12k" else s[key]
+            if values is None:
+                continue
+            x = i + (j - (len(policies) - 1) / 2) * width
+            ax.bar(x, np.mean(values), width * 0.9, color=colour, alpha=0.55, label=label if i == 0 else None)
+            ax.plot(np.full(len(values), x), values, "o", color=colour, markersize=3)
+    ax.axhline(0.9, color="tab:green", linestyle=":", linewidth=1)
+    ax.axhline(0.6, color="tab:red", linestyle=":", linewidth=1)
+    ax.set_xticks(range(len(settings)), [f"{s['name']} swerve (rise {s['swerve_rise']:g})" for s in settings])
+    ax.set_ylabel("success (expert: 1.00)"); ax.set_ylim(0, 1.05); ax.grid(alpha=0.3, axis="y")
+    ax.legend(frameon=False, fontsize=7, ncols=3, loc="upper center", bbox_to_anchor=(0.5, -0.12))
+    ax.set_title("Committing where the demonstrators split: 5 seeds per bar (dotted: the targets)", fontsize=9)
+    plt.tight_layout(); fig.savefig(path, dpi=110); plt.close(fig)
+
+
 def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     flow_figure(OUT / "multimodal_flow.png")
     euler_figure(OUT / "multimodal_euler.png")
-    print(f"wrote {OUT / 'multimodal_flow.png'} and {OUT / 'multimodal_euler.png'}")
+    averaging_figure(OUT / "multimodal_averaging.png")
+    print(f"wrote {OUT / 'multimodal_flow.png'}, {OUT / 'multimodal_euler.png'} and {OUT / 'multimodal_averaging.png'}")
 
 
 if __name__ == "__main__":

@@ -174,3 +174,17 @@ def test_the_chunk_schedule_is_what_a_planner_that_replans_every_k_steps_runs():
             used += 1
         assert executed == [(t // k, t - k * (t // k)) for t in range(T)]
         assert chunks == list(range(0, T, k))     # chunk i is planned from the observation at step i k
+
+
+def test_the_chapters_averaging_table_is_the_benchmarks():
+    """The table of sec-mm-bites quotes bench/results/hw1b_multimodal.json (mean ± std over its 5 seeds)."""
+    import json
+
+    root = Path(__file__).resolve().parents[1]
+    record = json.loads((root / "bench" / "results" / "hw1b_multimodal.json").read_text())
+    text = (root / "lectures" / "01b_multimodal.md").read_text()
+    ms = lambda x: f"{np.mean(x):.2f} ± {np.std(x):.2f}"  # noqa: E731
+    for s in record["averaging"]["settings"]:
+        row = (f"| {s['name']} ({s['swerve_rise']:g}) | {ms(s['l2'])} | {ms(s['mixture'])} | {ms(s['flow'])} | "
+               f"{ms(s['l2_one_step'])} |")
+        assert row in text, f"the chapter's row for the {s['name']} swerve differs from the benchmark's: {row}"
