@@ -8,10 +8,7 @@ from rlcourse.nets import GaussianPolicy
 
 HINT = ("r = beta * (sum_t log pi(a_t|s_t) - sum_t log pi_ref(a_t|s_t)) per segment, margin = r_chosen - r_rejected, "
         "loss = -mean(logsigmoid(margin)); reference under torch.no_grad().")
-MAKE = "(torch.manual_seed(s), GaussianPolicy(11, 3, hidden=(8,), log_std_init=ls))[1]"
-REF = "(torch.manual_seed(rs), GaussianPolicy(11, 3, hidden=(8,), log_std_init=ls))[1]"
-SHIFTED = f"(lambda p: (p.mean.bias.data.add_(shift), p.log_std.data.add_(dstd), p)[2])({MAKE})"
-CALL = f"dpo_loss({SHIFTED}, {REF}, (co, ca), (ro, ra), beta)"
+INFO = ("margin", "accuracy", "chosen_reward", "rejected_reward")
 
 
 def _policy(s, ls, shift=0.0, dstd=0.0):
@@ -41,9 +38,16 @@ def _data(rng, b=10, length=6):
     return dict(co=f(b, length, 11), ca=np.clip(f(b, length, 3), -1, 1), ro=f(b, length, 11), ra=np.clip(f(b, length, 3), -1, 1))
 
 
-def _student_call(student, d, beta, s=0, rs=0, ls=-0.5, shift=0.0, dstd=0.0):
-    names = {k: torch.as_tensor(v) for k, v in d.items()}
-    out = student.eval(CALL, s=s, rs=rs, ls=ls, shift=shift, dstd=dstd, beta=beta, **names)
+def _args(student, d, beta, s=0, rs=0, ls=-0.5, shift=0.0, dstd=0.0):
+    """dpo_loss's arguments in the sandbox: the moved policy and its reference (sandbox_helpers.dpo_policy, both
+    built like :func:`_policy` here), the chosen and the rejected segments, beta."""
+    d = {k: torch.as_tensor(v) for k, v in d.items()}
+    return [student.helpers.dpo_policy(s, ls, shift, dstd), student.helpers.dpo_policy(rs, ls), (d["co"], d["ca"]),
+            (d["ro"], d["ra"]), beta]
+
+
+def _student_call(student, d, beta, **policies):
+    out = student.dpo_loss(*_args(student, d, beta, **policies))
     assert isinstance(out, (tuple, list)) and len(out) == 2, "dpo_loss should return (loss, info)"
     return out
 
@@ -79,10 +83,11 @@ def test_gradient_matches_finite_difference(student, rng):
     """Autograd gradient in the policy's mean bias and log-std, against central differences of the hand loss"""
     d = _data(rng, 8, 5)
     beta, shift, dstd = 0.5, 0.1, -0.1
-    expr = (f"torch.autograd.grad(dpo_loss((p := {SHIFTED}), {REF}, (co, ca), (ro, ra), beta)[0], "
-            "[p.mean.bias, p.log_std])")
-    got = student.eval(expr, s=0, rs=0, ls=-0.5, shift=shift, dstd=dstd, beta=beta,
-                       **{k: torch.as_tensor(v) for k, v in d.items()})
+    _, grads = student.helpers.parameter_grads("dpo_loss", _args(student, d, beta, shift=shift, dstd=dstd), output=0,
+                                               names=["mean.bias", "log_std"])
+    assert grads["mean.bias"] is not None and grads["log_std"] is not None, \
+        "no gradient reaches the policy: keep the graph through its log-likelihoods"
+    got = [grads["mean.bias"], grads["log_std"]]
     ref, h = _policy(0, -0.5), 1e-3
     for which, name in ((0, "mean.bias"), (1, "log_std")):
         fd = np.zeros(3)
@@ -113,7 +118,10 @@ def test_logged_metrics(student, rng):
                       ("accuracy", float((m > 0).mean()))):
         assert key in info, f"info misses {key!r} (has {sorted(info)})"
         check_scalar(float(info[key]), float(want), rtol=1e-4, atol=1e-4, name=f"info[{key!r}]")
-    assert all(not (torch.is_tensor(v) and v.requires_grad) for v in info.values()), "detach the logged metrics"
+    args = _args(student, d, beta, shift=0.3, dstd=0.2)
+    for key in INFO:
+        _, through = student.helpers.parameter_grads("dpo_loss", args, output=[1, key])
+        assert all(g is None for g in through.values()), f"info[{key!r}] still carries the autograd graph: detach the logged metrics"
 
 
 @stub("dpo_loss", points=1, hint=HINT)
@@ -131,16 +139,15 @@ def test_large_margins_are_stable(student, rng):
 @stub("dpo_loss", points=1, hint="Compute the reference's log-likelihoods under torch.no_grad() (or detach them).")
 def test_no_gradient_into_the_reference(student, rng):
     """After backward, the policy has gradients and the reference has none"""
-    d = {k: torch.as_tensor(v) for k, v in _data(rng, 5, 5).items()}
-    expr = (f"(lambda p, r: (dpo_loss(p, r, (co, ca), (ro, ra), 0.5)[0].backward(), "
-            "(p.mean.bias.grad, all(q.grad is None for q in r.parameters())))[1])"
-            f"({SHIFTED}, {REF}.requires_grad_(True))")
-    out = student.eval(expr, s=0, rs=1, ls=-0.5, shift=0.1, dstd=0.0, **d)
-    assert isinstance(out, (tuple, list)) and len(out) == 2, "could not differentiate the loss"
-    policy_grad, reference_clean = out
+    d = _data(rng, 5, 5)
+    args = _args(student, d, 0.5, s=0, rs=1, shift=0.1)
+    _, into_policy = student.helpers.parameter_grads("dpo_loss", args, output=0, module=0, names=["mean.bias"])
+    _, into_reference = student.helpers.parameter_grads("dpo_loss", args, output=0, module=1)
+    policy_grad = into_policy["mean.bias"]
     assert policy_grad is not None, "the policy gets no gradient: keep the graph through its log-likelihoods"
-    assert reference_clean is True, ("the reference's parameters got gradients: compute its log-likelihoods under "
-                                     "torch.no_grad() (or detach them)")
+    assert all(g is None for g in into_reference.values()), ("the reference's parameters got gradients: compute its "
+                                                             "log-likelihoods under torch.no_grad() (or detach them)")
+    d = {k: torch.as_tensor(v) for k, v in d.items()}
     pol, ref = _policy(0, -0.5, 0.1), _policy(1, -0.5)
     for p in ref.parameters():
         p.requires_grad_(False)

@@ -7,9 +7,13 @@ from autograder.suite import check_scalar, check_tensor, stub
 HINT = ("loss = -mean(min(rho * A, clip(rho, 1 - eps, 1 + eps) * A)) + vf_coef * 0.5 * mean((V - R)^2) "
         "- ent_coef * mean(entropy) + kl_coef * mean(kl_to_ref), with rho = exp(new_log_prob - old_log_prob).")
 KEYS = ("policy_loss", "value_loss", "entropy", "kl_ref", "approx_kl", "clip_frac")
-GRAD = ("torch.autograd.grad(ppo_loss((x := torch.tensor(new, requires_grad=True)), torch.as_tensor(old), "
-        "torch.as_tensor(adv), torch.as_tensor(val), torch.as_tensor(ret), torch.as_tensor(ent), torch.as_tensor(kl), "
-        "0.2, 0.5, 0.0, 0.0)[0], x)[0]")
+ARGS = ("new_log_prob", "old_log_prob", "advantages", "new_values", "returns", "entropy", "kl_to_ref")
+
+
+def _loss_grads(student, batch, wrt, clip=0.2, vf=0.5, ent=0.0, kl=0.0):
+    """d loss / d each input named in ``wrt``, by autograd through the student's ppo_loss in the sandbox."""
+    args = [batch[key] for key in ARGS] + [clip, vf, ent, kl]
+    return student.helpers.grad("ppo_loss", args, wrt=[ARGS.index(key) for key in wrt], output=0)
 
 
 def _batch(rng, b=32):
@@ -41,9 +45,10 @@ def test_matches_reference_loss_and_terms(student, reference, rng):
 
 def _grad(student, new, adv, old=None):
     n = len(new)
-    names = dict(new=np.asarray(new, float), old=np.zeros(n) if old is None else old, adv=np.asarray(adv, float),
-                 val=np.zeros(n), ret=np.zeros(n), ent=np.zeros(n), kl=np.zeros(n))
-    return student.eval(GRAD, **names)
+    t = lambda a: torch.as_tensor(np.asarray(a, dtype=float))
+    batch = dict(new_log_prob=t(new), old_log_prob=t(np.zeros(n) if old is None else old), advantages=t(adv),
+                 new_values=t(np.zeros(n)), returns=t(np.zeros(n)), entropy=t(np.zeros(n)), kl_to_ref=t(np.zeros(n)))
+    return _loss_grads(student, batch, ["new_log_prob"])[0]
 
 
 @stub("ppo_loss", points=1, hint="Positive advantage: the ratio is capped at 1 + eps (no gradient beyond it) but "
@@ -74,10 +79,7 @@ def test_kl_penalty(student, rng):
     with_kl = float(_call(student, batch, kl=0.7)[0])
     check_scalar(with_kl - base, 0.7 * float(batch["kl_to_ref"].mean()), rtol=1e-5, atol=1e-7,
                  name="loss(kl_coef = 0.7) - loss(kl_coef = 0)")
-    expr = ("torch.autograd.grad(ppo_loss(n, o, a, v, r, e, (k := torch.tensor(kl, requires_grad=True)), 0.2, 0.5, "
-            "0.0, 0.7)[0], k)[0]")
-    got = student.eval(expr, n=batch["new_log_prob"], o=batch["old_log_prob"], a=batch["advantages"],
-                       v=batch["new_values"], r=batch["returns"], e=batch["entropy"], kl=batch["kl_to_ref"].numpy())
+    got = _loss_grads(student, batch, ["kl_to_ref"], kl=0.7)[0]
     check_tensor(got, torch.full((8,), 0.7 / 8, dtype=torch.float64), rtol=1e-5, name="d loss / d kl_to_ref")
 
 
@@ -86,11 +88,7 @@ def test_kl_penalty(student, rng):
 def test_value_and_entropy_terms(student, rng):
     """Gradients with respect to the values and to the entropy"""
     batch = _batch(rng, 6)
-    expr = ("torch.autograd.grad(ppo_loss(n, o, a, (vv := torch.tensor(v, requires_grad=True)), r, "
-            "(ee := torch.tensor(e, requires_grad=True)), k, 0.2, 0.5, 0.03, 0.0)[0], [vv, ee])")
-    names = dict(n=batch["new_log_prob"], o=batch["old_log_prob"], a=batch["advantages"], v=batch["new_values"].numpy(),
-                 r=batch["returns"], e=batch["entropy"].numpy(), k=batch["kl_to_ref"])
-    got = student.eval(expr, **names)
+    got = _loss_grads(student, batch, ["new_values", "entropy"], ent=0.03)
     check_tensor(got[0], 0.5 * (batch["new_values"] - batch["returns"]) / 6, rtol=1e-5, atol=1e-8, name="d loss / d values")
     check_tensor(got[1], torch.full((6,), -0.03 / 6, dtype=torch.float64), rtol=1e-5, name="d loss / d entropy")
 
@@ -105,9 +103,18 @@ def test_diagnostics(student):
                                    0.2, 0.5, 0.0, 0.0)
     check_scalar(float(terms["approx_kl"]), float(np.mean(ratios - 1 - np.log(ratios))), rtol=1e-5, name="approx_kl")
     check_scalar(float(terms["clip_frac"]), 0.5, name="clip_frac for ratios 1, 1.3, 0.7, 1.1 and eps 0.2")
-    flags = student.eval("(lambda out: (out[0].requires_grad, any(torch.is_tensor(t) and t.requires_grad "
-                         "for t in out[1].values())))(ppo_loss(torch.zeros(3, requires_grad=True), z, a, "
-                         "torch.zeros(3, requires_grad=True), z, torch.zeros(3, requires_grad=True), "
-                         "torch.zeros(3, requires_grad=True), 0.2, 0.5, 0.01, 0.1))", z=torch.zeros(3), a=torch.ones(3))
-    assert flags[0] is True, "the loss has no autograd graph: compute it with torch operations on the inputs"
-    assert flags[1] is False, "a logged term still carries the autograd graph: detach every value in the terms dict"
+    z, leaf = torch.zeros(3, dtype=torch.float64), torch.zeros(3, dtype=torch.float64)
+    batch = dict(new_log_prob=leaf, old_log_prob=z, advantages=torch.ones(3, dtype=torch.float64), new_values=leaf,
+                 returns=z, entropy=leaf, kl_to_ref=leaf)
+    wrt = ["new_log_prob", "new_values", "entropy", "kl_to_ref"]
+    grads = _loss_grads(student, batch, wrt, ent=0.01, kl=0.1)    # at ratio 1, A = 1, V = R = 0
+    assert all(g is not None for g in grads), \
+        "the loss has no autograd graph to some of its inputs: compute it with torch operations on the inputs"
+    check_tensor(grads[0], torch.full((3,), -1 / 3, dtype=torch.float64), rtol=1e-5, name="d loss / d new_log_prob")
+    check_tensor(grads[2], torch.full((3,), -0.01 / 3, dtype=torch.float64), rtol=1e-5, name="d loss / d entropy")
+    check_tensor(grads[3], torch.full((3,), 0.1 / 3, dtype=torch.float64), rtol=1e-5, name="d loss / d kl_to_ref")
+    args = [batch[key] for key in ARGS] + [0.2, 0.5, 0.01, 0.1]
+    for key in KEYS:
+        through = student.helpers.grad("ppo_loss", args, wrt=[ARGS.index(k) for k in wrt], output=[1, key])
+        assert all(g is None for g in through), \
+            f"terms[{key!r}] still carries the autograd graph: detach every value in the terms dict"
