@@ -32,14 +32,15 @@ re-read the test against the new text and updated the digest.
 when a test names a label that no longer exists, or when a digest is stale.
 
 Notebooks point into the notes with relative Markdown links, which JupyterLab
-opens from the notebook's folder::
+opens from the notebook's folder, scrolled to the heading whose id (its text,
+spaces made hyphens) follows the ``#``::
 
-    [lecture 6, eq. (eq-kl-estimators)](../../lectures/06_rlhf.md#sec-kl-practice)
+    [lecture 6, eq. (eq-kl-estimators)](../../lectures/06_rlhf.md#The-KL-to-the-reference,-in-practice)
 
 :func:`notebook_links` reads them from a notebook's Markdown cells and
 :meth:`NotebookLink.problem` says why one does not resolve: the page is
-missing, or it defines no such label (a MyST target ``(label)=``, an equation
-label, or a directive's ``:label:``/``:name:``).
+missing, or it has no such heading id, MyST target ``(label)=``, equation
+label or directive ``:label:``/``:name:``.
 
 Command line (from the repository root)::
 
@@ -295,12 +296,44 @@ _OPTION_LABEL = re.compile(r"^\s*:(?:label|name):\s*(?P<label>\S+)\s*$")
 _MD_LINK = re.compile(r"\]\((?P<target>[^()\s]*lectures/[^()\s#]*\.md)(?:#(?P<anchor>[^()\s]*))?\)")
 
 
+_HEADING = re.compile(r"^#{1,6}\s+(?P<text>.*?)\s*#*\s*$")
+
+
+def heading_id(text: str) -> str:
+    """The id JupyterLab gives a Markdown heading: its rendered text with every space made a hyphen (case kept;
+    inline code and emphasis marks are not text, math stays as written)."""
+    return re.sub(r"[`*]", "", text).strip().replace(" ", "-")
+
+
+def headings(path: Path) -> dict[str, str]:
+    """Each heading's JupyterLab id in one page, mapped to the MyST target just above it ('' if none)."""
+    out, target, fences = {}, "", []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        mark = _FENCE.match(line)
+        if mark:              # a fence closes with its own character, as long or longer, and no info string
+            marks, info = mark.group(1), mark.group(2)
+            if fences and not info and marks[0] == fences[-1][0] and len(marks) >= len(fences[-1]):
+                fences.pop()
+            else:
+                fences.append(marks)
+            continue
+        if fences:            # headings inside a code block or a directive are not the page's sections
+            continue
+        if m := _TARGET.match(line):
+            target = m.group("label")
+        elif m := _HEADING.match(line):
+            out[heading_id(m.group("text"))], target = target, ""
+        elif line.strip():
+            target = ""
+    return out
+
+
 def anchors(path: Path) -> set[str]:
-    """The labels a link may point at in one page: MyST targets ``(label)=``, labelled equations, and the
-    ``:label:`` or ``:name:`` of a directive (a theorem, a figure)."""
+    """What a link may point at in one page: a heading's JupyterLab id (what scrolls when JupyterLab opens the
+    page), a MyST target ``(label)=``, a labelled equation, or the ``:label:``/``:name:`` of a directive."""
     text = path.read_text(encoding="utf-8")
     found = {m.group("label") for line in text.splitlines() for m in [_TARGET.match(line) or _OPTION_LABEL.match(line)] if m}
-    return found | {eq.label for eq in parse_equations(text, path)}
+    return found | {eq.label for eq in parse_equations(text, path)} | set(headings(path))
 
 
 @dataclass(frozen=True)
@@ -318,8 +351,8 @@ class NotebookLink:
         if not page.is_file():
             return f"{self.notebook.relative_to(REPO)} cell {self.cell}: {self.target} is not a file"
         if self.anchor and self.anchor not in anchors(page):
-            return (f"{self.notebook.relative_to(REPO)} cell {self.cell}: {page.relative_to(REPO)} has no label "
-                    f"'{self.anchor}' (a MyST target '({self.anchor})=' or an equation label)")
+            return (f"{self.notebook.relative_to(REPO)} cell {self.cell}: {page.relative_to(REPO)} has no heading, "
+                    f"target or label '{self.anchor}' (a heading's JupyterLab id is its text with spaces as '-')")
         return None
 
 

@@ -160,7 +160,7 @@ def test_bad_digest_is_refused():
 
 NOTEBOOKS = sorted((ll.REPO / "solutions").glob("*/*.ipynb")) + sorted((ll.REPO / "assignments").glob("*/*.ipynb"))
 # Assignments whose notebooks do not point into the notes yet, each to be removed by the commit that adds links.
-UNLINKED: set[str] = {"hw1_imitation", "hw1b_multimodal", "hw4_rlhf_dpo"}
+UNLINKED: set[str] = {"hw1b_multimodal", "hw4_rlhf_dpo"}
 
 
 def test_every_notebook_link_into_the_notes_names_a_page_and_a_label_that_exist():
@@ -182,19 +182,24 @@ def test_every_notebook_links_its_lectures_unless_listed_as_pending():
 def test_a_link_to_a_missing_label_or_page_is_reported(tmp_path, monkeypatch):
     (tmp_path / "lectures").mkdir()
     (tmp_path / "lectures" / "ch.md").write_text(
-        "(sec-a)=\n# A\n\n$$\nx = 1\n$$ (eq-x)\n\n```{prf:theorem} T\n:label: thm-t\n```\n")
+        "(sec-a)=\n# A\n\n$$\nx = 1\n$$ (eq-x)\n\n```{prf:theorem} T\n:label: thm-t\n```\n\n"
+        "(sec-b2)=\n## Best-of-$n$, and `code`\n\n```python\n# not a heading\n```\n")
     nb_dir = tmp_path / "solutions" / "hw"
     nb_dir.mkdir(parents=True)
     cells = [{"cell_type": "markdown", "metadata": {}, "source": [
         "[ok](../../lectures/ch.md#sec-a) [eq](../../lectures/ch.md#eq-x) [thm](../../lectures/ch.md#thm-t) "
-        "[page](../../lectures/ch.md) [bad](../../lectures/ch.md#sec-b) [gone](../../lectures/no.md#sec-a)"]},
+        "[page](../../lectures/ch.md) [bad](../../lectures/ch.md#sec-b) [gone](../../lectures/no.md#sec-a) "
+        "[lab](../../lectures/ch.md#Best-of-$n$,-and-code) [code](../../lectures/ch.md#not-a-heading)"]},
              {"cell_type": "code", "metadata": {}, "source": ["# [not markdown](../../lectures/ch.md#zzz)"], "outputs": []}]
     (nb_dir / "hw.ipynb").write_text(__import__("json").dumps({"cells": cells, "metadata": {}, "nbformat": 4,
                                                                "nbformat_minor": 5}))
     monkeypatch.setattr(ll, "REPO", tmp_path)
     links = ll.notebook_links(nb_dir / "hw.ipynb")
     assert [(link.target.split("/")[-1], link.anchor) for link in links] == [
-        ("ch.md", "sec-a"), ("ch.md", "eq-x"), ("ch.md", "thm-t"), ("ch.md", ""), ("ch.md", "sec-b"), ("no.md", "sec-a")]
+        ("ch.md", "sec-a"), ("ch.md", "eq-x"), ("ch.md", "thm-t"), ("ch.md", ""), ("ch.md", "sec-b"), ("no.md", "sec-a"),
+        ("ch.md", "Best-of-$n$,-and-code"), ("ch.md", "not-a-heading")]
     problems = [link.problem() for link in links]
-    assert problems[:4] == [None] * 4
-    assert "no label 'sec-b'" in problems[4] and "is not a file" in problems[5]
+    assert problems[:4] == [None] * 4 and problems[6] is None
+    assert "no heading, target or label 'sec-b'" in problems[4] and "is not a file" in problems[5]
+    assert "'not-a-heading'" in problems[7], "a comment in a code block is not a heading"
+    assert ll.headings(tmp_path / "lectures" / "ch.md") == {"A": "sec-a", "Best-of-$n$,-and-code": "sec-b2"}
