@@ -41,7 +41,7 @@ demonstrators split:
 - *Targets* (issue 34): in every setting the chunked L2 clone reaches at most 0.6 of the expert's success,
   flow matching at least 0.9 with each side between 30 and 70% of its successes.
 
-    python bench/bench_hw1b_multimodal.py --averaging       # 3 settings x 5 seeds, about 10 minutes on one core
+    python bench/bench_hw1b_multimodal.py --averaging       # 3 settings x 5 seeds: 4.4 min at load average 3 to 7
 
 *Follow-up* (``--followup``, the ``"averaging_followup"`` entry), declared after the protocol above had been run
 and had left flow matching at 0.65 to 0.78 (its failures: chunks sampled between the two modes at the first
@@ -51,7 +51,7 @@ settings, seeds and evaluation; flow matching only, with 12,000 Adam steps (four
 shipped demonstrations, and with 12,000 steps on 1,000 demonstrations (made by the dataset script's recorder with
 seed 0, in memory; their first 200 are the shipped ones). Every cell is reported, whatever it shows.
 
-    python bench/bench_hw1b_multimodal.py --followup        # 3 settings x 5 seeds x 2 cells, about 20 minutes
+    python bench/bench_hw1b_multimodal.py --followup        # 3 settings x 5 seeds x 2 cells: 33 min at load 15 to 20
 
 Each (setting, seed) is written to ``bench/results/hw1b_multimodal.averaging.partial.json`` as it finishes and
 skipped when the script is run again; the final file gets per-seed lists and a ``meta`` object.
