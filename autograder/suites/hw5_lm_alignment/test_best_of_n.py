@@ -1,23 +1,42 @@
-"""Hidden tests of hw5's `best_of_n`: fake generators and reward models defined inside the sandbox."""
+"""Hidden tests of hw5's `best_of_n`: a fake generator and reward model lent by the grader, which keeps its own
+record of every candidate generated (the stub's word about what it generated is never asked for)."""
 import numpy as np
 import torch
 
-from autograder.suite import stub
+from autograder.suite import lend, stub
 
 HINT = ("Repeat each prompt n times (repeat_interleave), generate once, score once, reshape the scores to (B, n), "
         "take the argmax per prompt and return those sequences, each after its own prompt.")
-# generate: appends L random tokens and records every candidate; reward: a fixed random weight per token id.
-RUN = ("(lambda log: (best_of_n(lambda p: log.append(torch.cat([p, torch.randint(3, 40, (p.shape[0], L))], 1)) or log[-1], "
-       "lambda s: (s[:, -L:] * torch.arange(L)).sum(1).float() % 17.0, prompts, n), log))([])")
+
+
+class _Models:
+    """generate: appends L random tokens to each prompt (and records every candidate); reward: a fixed function of
+    the last L tokens."""
+
+    def __init__(self, length: int, seed: int) -> None:
+        self.length, self.rng, self.candidates = length, np.random.default_rng(seed), []
+
+    def generate(self, prompts):
+        prompts = torch.as_tensor(prompts)
+        new = torch.as_tensor(self.rng.integers(3, 40, size=(prompts.shape[0], self.length)), dtype=prompts.dtype)
+        out = torch.cat([prompts, new], 1)
+        self.candidates.append(out)
+        return out
+
+    def reward(self, sequences):
+        return self.score(torch.as_tensor(sequences))
+
+    def score(self, sequences):
+        return ((sequences[:, -self.length:] * torch.arange(self.length)).sum(1).float() % 17.0)
 
 
 def _run(student, prompts, n, length):
-    out = student.eval(f"(torch.manual_seed(seed), {RUN})[1]", prompts=prompts, n=n, L=length, seed=int(n * 7 + length))
-    best, log = out
+    models = _Models(length, seed=int(n * 7 + length))
+    best = student.helpers.run_best_of_n(lend(models, methods=["generate", "reward"]), prompts, n)
     assert type(best) is torch.Tensor, f"return a torch tensor, got {type(best).__name__}"
-    candidates = torch.cat(list(log))
-    scores = ((candidates[:, -length:] * torch.arange(length)).sum(1).float() % 17.0).numpy()
-    return best, candidates, scores
+    assert models.candidates, "generate was never called"
+    candidates = torch.cat(models.candidates)
+    return best, candidates, models.score(candidates).numpy()
 
 
 def _check(best, candidates, scores, prompts, n):

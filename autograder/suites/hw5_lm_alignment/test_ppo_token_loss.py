@@ -6,8 +6,22 @@ from autograder.suite import check_scalar, check_tensor, stub
 
 HINT = ("Per token: max(-ratio * A, -clip(ratio, 1 - eps, 1 + eps) * A) with ratio = exp(logp - logp_old); "
         "plus value_coef * (V - G)^2; both averaged over ALL masked tokens of the batch (sum / mask.sum()).")
-CALL = "ppo_token_loss(lp, lp_old, adv, v, ret, mask, clip_eps=eps, value_coef=c)"
-GRAD = f"(lambda lp: torch.autograd.grad({CALL}, lp)[0])(lp0.clone().requires_grad_())"
+
+
+def _args(lp, lp_old, adv, v, ret, mask, eps, c):
+    """The stub's arguments: positional, then keyword."""
+    return [lp, lp_old, adv, v, ret, mask], dict(clip_eps=eps, value_coef=c)
+
+
+def _loss(ns, **kw):
+    args, kwargs = _args(**kw)
+    return ns.ppo_token_loss(*args, **kwargs)
+
+
+def _grad(ns, **kw):
+    """d loss / d logp, by autograd through that side's ppo_token_loss (a raw tensor, judged here)."""
+    args, kwargs = _args(**kw)
+    return ns.helpers.grad("ppo_token_loss", args, kwargs, wrt=[0])[0]
 
 
 def _one_token(student, ratio, adv, eps=0.2):
@@ -15,9 +29,10 @@ def _one_token(student, ratio, adv, eps=0.2):
     kw = dict(lp_old=torch.zeros(1, 2), adv=torch.tensor([[0.0, adv]]), v=torch.zeros(1, 2), ret=torch.zeros(1, 2),
               mask=torch.tensor([[0.0, 1.0]]), eps=eps, c=0.5)
     lp0 = torch.tensor([[0.0, float(np.log(ratio))]])
-    loss = student.eval(CALL, lp=lp0, **kw)
-    grad = student.eval(GRAD, lp0=lp0, **kw)
+    loss = _loss(student, lp=lp0, **kw)
+    grad = _grad(student, lp=lp0, **kw)
     assert type(loss) is torch.Tensor and loss.dim() == 0, "return a 0-dim torch tensor"
+    assert type(grad) is torch.Tensor, "no gradient reaches logp: keep the loss in torch"
     return float(loss), grad.detach().numpy()[0, 1]
 
 
@@ -59,8 +74,8 @@ def test_ragged_batch_matches_reference(student, reference, rng):
     for k in kw:
         kw[k][~torch.as_tensor(mask)] = 1e3 * (1 if k != "lp" else -1)   # junk where masked
     kw.update(mask=torch.as_tensor(mask.astype(np.float64)), eps=0.2, c=0.7)
-    want = reference.eval(CALL, **kw)
-    got = student.eval(CALL, **kw)
+    want = _loss(reference, **kw)
+    got = _loss(student, **kw)
     check_tensor(got, want, rtol=1e-6, atol=1e-9, name="the loss")
 
 
@@ -69,6 +84,6 @@ def test_value_term(student):
     """Zero advantages: the loss is value_coef times the masked mean squared value error"""
     mask = torch.tensor([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
     v, ret = torch.tensor([[9.0, 1.0, 2.0], [9.0, 3.0, 9.0]]), torch.zeros(2, 3)
-    got = student.eval(CALL, lp=torch.zeros(2, 3), lp_old=torch.zeros(2, 3), adv=torch.zeros(2, 3), v=v, ret=ret,
-                       mask=mask, eps=0.2, c=0.25)
+    got = _loss(student, lp=torch.zeros(2, 3), lp_old=torch.zeros(2, 3), adv=torch.zeros(2, 3), v=v, ret=ret,
+                mask=mask, eps=0.2, c=0.25)
     check_scalar(float(got), 0.25 * (1 + 4 + 9) / 3, name="the value loss")

@@ -39,6 +39,8 @@ def test_padding_changes_nothing(student, rng, ragged_batch):
     """Garbage logits and tokens on masked positions (prompt and padding) leave the result unchanged"""
     logits, tokens, mask = ragged_batch(rng)
     base = _as_np(student.token_log_probs(logits, tokens, mask))
+    check_array(base, direct_token_log_probs(logits, tokens, mask), rtol=1e-5, atol=1e-6,
+                name="the result before garbage is put on the masked positions")
     junk_logits, junk_tokens = logits.clone(), tokens.clone()
     predicts_masked = torch.cat([mask[:, 1:], torch.zeros(len(mask), 1, dtype=mask.dtype)], 1) == 0
     junk_logits[predicts_masked] = torch.as_tensor(rng.normal(scale=1e4, size=(int(predicts_masked.sum()), logits.shape[-1])))
@@ -60,10 +62,9 @@ def test_bool_mask_and_extreme_logits(student, rng, ragged_batch):
 def test_gradient_flows_to_logits(student, reference, rng, ragged_batch):
     """The gradient of the summed result with respect to the logits matches the definition's"""
     logits, tokens, mask = ragged_batch(rng, b=3, t=6, v=5)
-    expr = "torch.autograd.grad(token_log_probs(x, tokens, mask).sum(), x)[0]"
-    kw = dict(tokens=tokens, mask=mask)
-    got = student.eval(f"(lambda x: {expr})(logits.clone().requires_grad_())", logits=logits, **kw)
-    want = reference.eval(f"(lambda x: {expr})(logits.clone().requires_grad_())", logits=logits, **kw)
+    ones = torch.ones(tokens.shape, dtype=logits.dtype)        # d (sum of the result) / d logits
+    got, want = (ns.helpers.grad("token_log_probs", [logits, tokens, mask], wrt=[0], grad_outputs=ones)[0]
+                 for ns in (student, reference))
     check_tensor(got, want, rtol=1e-5, atol=1e-7, name="the gradient")
 
 
