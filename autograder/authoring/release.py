@@ -91,7 +91,13 @@ This folder holds everything you need for the course:
 
 ## Set up (Python 3.11)
 
-    python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/jupyter lab assignments/hw0_setup/hw0_setup.ipynb
+    python3 -m venv .venv && .venv/bin/pip install -e .
+    .venv/bin/jupyter lab
+
+Run both from this folder: JupyterLab then opens with the whole course in its file browser (every
+assignment and the lectures); start with `assignments/hw0_setup/hw0_setup.ipynb`. Activating the
+environment (`source .venv/bin/activate`) puts `jupyter` and `python` on your `PATH` for any command
+the lectures show.
 
 Each assignment runs on a laptop CPU. Fill in the cells that say `raise NotImplementedError()`,
 run the public check under each, and submit the `.ipynb` file as your course tells you.
