@@ -198,7 +198,7 @@ def test_the_dockerfile_builds_the_kit_with_cpu_torch_and_no_solution():
     # The entrypoint run.sh calls: /opt/rlcourse/.venv/bin/python -m autograder prairielearn ...
     assert "WORKDIR /opt/rlcourse" in text and "python -m venv .venv" in text
     run_sh = prairielearn.RUN_SH.format(assignment=QUICK, folder=f"rlcourse-{QUICK}")
-    assert 'cd "${RLCOURSE_INSTALL:-/opt/rlcourse}"' in run_sh
+    assert 'install="${RLCOURSE_INSTALL:-/opt/rlcourse}"' in run_sh and 'cd "$install"' in run_sh
     assert f"exec .venv/bin/python -m autograder prairielearn {QUICK}" in run_sh
     copied = {source for sources, _ in _copies() for source in sources}
     forbidden = ("solutions", "autograder/suites", "autograder/samples", ".", "autograder", "datasets",

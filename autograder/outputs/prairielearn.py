@@ -45,8 +45,9 @@ RUN_SH = """\
 set -u
 grade="${{PL_GRADE_ROOT:-/grade}}"
 mkdir -p "$grade/results"
-export RLCOURSE_REPO="$grade/serverFilesCourse/{folder}"
-cd "${{RLCOURSE_INSTALL:-/opt/rlcourse}}"
+install="${{RLCOURSE_INSTALL:-/opt/rlcourse}}"
+export RLCOURSE_REPO="$grade/serverFilesCourse/{folder}" PYTHONPATH="$install${{PYTHONPATH:+:$PYTHONPATH}}"
+cd "$install"
 exec .venv/bin/python -m autograder prairielearn {assignment} --root "$grade"
 """
 
