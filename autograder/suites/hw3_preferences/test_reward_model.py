@@ -2,8 +2,8 @@
 import numpy as np
 import torch
 
-from autograder.suite import check_tensor, describe, stub
-from rlcourse.preferences import (expected_bayes_accuracy, random_pairs, rao_kupper_probabilities,
+from autograder.suite import check_tensor, stub
+from rlcourse.preferences import (RewardEnsemble, expected_bayes_accuracy, random_pairs, rao_kupper_probabilities,
                                   simulate_annotator)
 
 SR_HINT = ("Call reward_model(obs, act) and sum over the LAST axis (time): (B, L) -> (B,), "
@@ -12,7 +12,7 @@ PL_HINT = ("-mean(mu * logsigmoid(Ra - Rb) + (1 - mu) * logsigmoid(Rb - Ra)) wit
            "return a 0-dim tensor that keeps the graph.")
 TR_HINT = ("Bootstrap each member's pairs, Adam on preference_loss of segment_return under ensemble.member(k), "
            "then ensemble.normalise_ on the segments that appear in pairs.")
-ENSEMBLE = "RewardEnsemble(11, 3, n_members=3, seed=seed)"
+ENSEMBLE = "rlcourse.preferences.RewardEnsemble"
 _CACHE = {}
 
 
@@ -21,12 +21,17 @@ def _segments(rng, b, length):
             torch.as_tensor(rng.uniform(-1, 1, size=(b, length, 3)), dtype=torch.float32))
 
 
+def _ensemble(ns, seed):
+    """A seeded RewardEnsemble(11, 3, n_members=3), built from the release on that side (a handle)."""
+    return ns.helpers.build(ENSEMBLE, 11, 3, n_members=3, seed=seed)
+
+
 @stub("segment_return", points=2, hint=SR_HINT)
 def test_segment_return_ensemble(student, reference, rng):
     """An ensemble of 3 on 6 segments of 25 steps: (3, 6), summed over time"""
     obs, act = _segments(rng, 6, 25)
-    got = student.segment_return(student.eval(ENSEMBLE, seed=5), obs, act)
-    check_tensor(got, reference.segment_return(reference.eval(ENSEMBLE, seed=5), obs, act), rtol=1e-5, atol=1e-5)
+    got = student.segment_return(_ensemble(student, 5), obs, act)
+    check_tensor(got, reference.segment_return(_ensemble(reference, 5), obs, act), rtol=1e-5, atol=1e-5)
 
 
 @stub("segment_return", points=1, hint=SR_HINT)
@@ -34,20 +39,24 @@ def test_segment_return_single_member_other_lengths(student, reference, rng):
     """One member alone, one segment of 7 steps, and 4 segments of 1 step"""
     for b, length in ((1, 7), (4, 1)):
         obs, act = _segments(rng, b, length)
-        expr = f"segment_return({ENSEMBLE}.member(2), obs, act)"
-        check_tensor(student.eval(expr, seed=1, obs=obs, act=act), reference.eval(expr, seed=1, obs=obs, act=act),
+        check_tensor(student.segment_return(_ensemble(student, 1).member(2), obs, act),
+                     reference.segment_return(_ensemble(reference, 1).member(2), obs, act),
                      rtol=1e-5, atol=1e-5, name=f"the returns of {b} segment(s) of {length} step(s)")
 
 
 @stub("segment_return", points=1, hint=SR_HINT)
 def test_segment_return_is_differentiable(student, reference, rng):
-    """The result keeps the autograd graph (no numpy, no detach), with the right values"""
+    """The result keeps the autograd graph (no numpy, no detach): its gradients with respect to the weights are the reference's"""
     obs, act = _segments(rng, 3, 5)
-    ok = student.eval(f"segment_return({ENSEMBLE}, obs, act).requires_grad", seed=0, obs=obs, act=act)
-    assert ok is True, "the returned tensor does not require grad: compute it with torch operations only"
-    check_tensor(student.segment_return(student.eval(ENSEMBLE, seed=0), obs, act),
-                 reference.segment_return(reference.eval(ENSEMBLE, seed=0), obs, act), rtol=1e-5, atol=1e-5,
-                 name="the returns (the sum of the per-step rewards over time)")
+    weights = torch.as_tensor(rng.normal(size=(3, 3)), dtype=torch.float32)     # d sum(weights * returns) / d theta
+    (got, grads), (want, want_grads) = (ns.helpers.parameter_grads("segment_return", [_ensemble(ns, 0), obs, act],
+                                                                   grad_outputs=weights) for ns in (student, reference))
+    check_tensor(got, want, rtol=1e-5, atol=1e-5, name="the returns (the sum of the per-step rewards over time)")
+    assert isinstance(grads, dict) and set(grads) == set(want_grads), "could not differentiate the returns"
+    for name, w in want_grads.items():
+        assert grads[name] is not None, (f"no gradient reaches the ensemble's `{name}`: compute the returns with "
+                                         "torch operations only")
+        check_tensor(grads[name], w, rtol=1e-4, atol=1e-6, name=f"the gradient of the returns with respect to `{name}`")
 
 
 @stub("preference_loss", points=2, hint=PL_HINT)
@@ -71,10 +80,9 @@ def test_preference_loss_stable(student):
 def test_preference_loss_gradient(student, reference, rng):
     """Its gradient with respect to the first returns: (sigmoid(d) - mu) / B"""
     x, y, m = rng.normal(size=10), rng.normal(size=10), rng.choice([0.0, 0.5, 1.0], 10)
-    expr = ("torch.autograd.grad(preference_loss((ra := torch.tensor(x, requires_grad=True)), torch.as_tensor(y), "
-            "torch.as_tensor(m)), ra)[0]")
-    check_tensor(student.eval(expr, x=x, y=y, m=m), reference.eval(expr, x=x, y=y, m=m), rtol=1e-6, atol=1e-9,
-                 name="the gradient")
+    args = [torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(m)]
+    got, want = (ns.helpers.grad("preference_loss", args, wrt=[0])[0] for ns in (student, reference))
+    check_tensor(got, want, rtol=1e-6, atol=1e-9, name="the gradient")
 
 
 # The learner is trained and judged on segments made here, from a per-step reward the student never
@@ -143,23 +151,39 @@ def expected_accuracy(learned, returns, pairs):
     return float(correct.sum() / (right + wrong).sum())
 
 
-def _predict(ensemble_handle, obs, act, n_members):
-    rewards = ensemble_handle.predict(obs, act)
-    want = (n_members, *obs.shape[:2])
-    assert isinstance(rewards, np.ndarray) and rewards.shape == want, \
-        f"train_reward_model must return the RewardEnsemble: predict should give {want}, got {describe(rewards)}"
+def _trusted(student, handle, n_members):
+    """The grader's RewardEnsemble(7, 2, n_members) with the weights and normalisation of the returned ``handle``:
+    every reward judged here is computed on the grader's side, never by the returned object."""
+    ensemble = RewardEnsemble(OBS_DIM, ACT_DIM, n_members=n_members)
+    want = ensemble.state_dict()
+    state = student.helpers.module_state(handle)
+    assert isinstance(state, dict) and set(state) == set(want), (
+        f"train_reward_model must return the RewardEnsemble(obs_dim, act_dim, n_members={n_members}, hidden) it "
+        "trained (its parameters are not those of that ensemble)")
+    for key, value in want.items():
+        assert type(state[key]) is torch.Tensor and state[key].shape == value.shape, \
+            f"the returned ensemble's `{key}` has shape {tuple(getattr(state[key], 'shape', ()))}, expected {tuple(value.shape)}"
+    ensemble.load_state_dict(state)
+    return ensemble
+
+
+def _predict(ensemble, obs, act, n_members):
+    rewards = ensemble.predict(obs, act)
+    assert rewards.shape == (n_members, *obs.shape[:2])
     return rewards
 
 
-def _held_out(ensemble_handle, data, n_members):
+def _held_out(ensemble, data, n_members):
     """(expected held-out accuracy, learned held-out returns) of the ensemble-mean return."""
-    learned = _predict(ensemble_handle, data["test_obs"], data["test_act"], n_members).sum(-1).mean(0)
+    learned = _predict(ensemble, data["test_obs"], data["test_act"], n_members).sum(-1).mean(0)
     return expected_accuracy(learned, data["test_returns"], data["test_pairs"]), learned
 
 
-def _train(ns, data, n_labels, n_members, seed, n_steps):
-    return ns.train_reward_model(data["obs"], data["act"], data["pairs"][:n_labels], data["mu"][:n_labels],
-                                 n_members=n_members, n_steps=n_steps, seed=seed, timeout=120)
+def _train(student, data, n_labels, n_members, seed, n_steps):
+    """The grader's copy of the ensemble the student's train_reward_model returns."""
+    handle = student.train_reward_model(data["obs"], data["act"], data["pairs"][:n_labels], data["mu"][:n_labels],
+                                        n_members=n_members, n_steps=n_steps, seed=seed, timeout=120)
+    return _trusted(student, handle, n_members)
 
 
 @stub("train_reward_model", points=3, hint=TR_HINT)
@@ -192,17 +216,13 @@ def test_members_normalised_and_distinct(student):
     """Three members, each normalised to mean 0 and std 1 per step on the segments used, and no two alike"""
     data = _synthetic(0)
     pairs = data["pairs"][200:500]
-    ens = student.train_reward_model(data["obs"], data["act"], pairs, data["mu"][200:500], n_members=3, n_steps=50,
-                                     seed=2, timeout=120)
+    ens = _trusted(student, student.train_reward_model(data["obs"], data["act"], pairs, data["mu"][200:500], n_members=3,
+                                                       n_steps=50, seed=2, timeout=120), 3)
     used = np.unique(pairs)
     rewards = _predict(ens, data["obs"][used], data["act"][used], 3)
     flat = rewards.reshape(3, -1)
     assert np.allclose(flat.mean(1), 0, atol=1e-3) and np.allclose(flat.std(1, ddof=1), 1, atol=1e-2), \
         f"per-member means {flat.mean(1).round(3)} and stds {flat.std(1).round(3)} should be 0 and 1"
-    some = used[::7]
-    again = _predict(ens, data["obs"][some], data["act"][some], 3)
-    assert np.allclose(again, rewards[:, ::7], rtol=1e-4, atol=1e-5), \
-        "the reward of a step should not depend on which other segments are passed with it"
     fresh = _predict(ens, data["test_obs"], data["test_act"], 3).reshape(3, -1)
     for a, b in ((0, 1), (0, 2), (1, 2)):
         assert np.abs(fresh[a] - fresh[b]).max() > 1e-3, \
@@ -223,7 +243,8 @@ def test_members_train_on_different_bootstraps(student):
     obs = torch.as_tensor(rng.normal(size=(2 * n_pairs, length, OBS_DIM)), dtype=torch.float32)
     act = torch.as_tensor(rng.uniform(-1, 1, size=(2 * n_pairs, length, ACT_DIM)), dtype=torch.float32)
     pairs, mu = np.arange(2 * n_pairs).reshape(n_pairs, 2), rng.integers(0, 2, n_pairs).astype(float)
-    ens = student.train_reward_model(obs, act, pairs, mu, n_members=3, n_steps=200, seed=4, timeout=120)
+    ens = _trusted(student, student.train_reward_model(obs, act, pairs, mu, n_members=3, n_steps=200, seed=4,
+                                                       timeout=120), 3)
     returns = _predict(ens, obs, act, 3).sum(-1)                                  # (3, 2 * n_pairs)
     fit = (2 * mu - 1) * (returns[:, 0::2] - returns[:, 1::2])                   # > 0: the member agrees with the label
     agree = (fit > 0).mean(axis=1)

@@ -8,13 +8,33 @@ from rlcourse.preferences import DuelingBandit, dueling_regret
 HINT = ("U = W/N + sqrt(alpha ln t / N) (1 where N = 0, 1/2 on the diagonal); candidates c with U[c, j] >= 1/2 for all j; "
         "challenger d = argmax_j U[j, c]; duel (c, d) through env.duel and update W.")
 
-RUN = "rucb(env, horizon, 0.51, np.random.default_rng(seed))"
 
 
-def _bandit(P, seed):
-    """The environment stays in the grader: the stub duels through `duel` and knows only `n_arms`."""
-    env = DuelingBandit(P, seed)
-    return env, lend(env, methods=["duel"], attrs=["n_arms"])
+class _Recorder:
+    """An environment as lent to the stub, with the grader's own record of every duel asked of it: the tests
+    judge this record, never the duels the stub says it played."""
+
+    def __init__(self, env) -> None:
+        self.env, self.n_arms, self.duels = env, env.n_arms, []
+
+    def duel(self, c, d) -> float:
+        self.duels.append((int(c), int(d)))
+        return self.env.duel(c, d)
+
+
+def _played(student, env, horizon, seed):
+    """The duels the stub asked of ``env`` (the grader's record), after checking it returned exactly them."""
+    recorder = _Recorder(env)
+    returned = student.helpers.run_rucb(lend(recorder, methods=["duel"], attrs=["n_arms"]), horizon, seed, timeout=60)
+    n = len(recorder.duels)
+    assert n == horizon, f"rucb should duel exactly once per step through env.duel ({horizon} steps), it dueled {n} times"
+    played = np.array(recorder.duels, dtype=np.int64).reshape(-1, 2)
+    assert isinstance(returned, np.ndarray) and returned.shape == (horizon, 2), \
+        f"rucb should return an array of shape ({horizon}, 2), got {type(returned).__name__} {np.shape(returned)}"
+    assert returned.dtype.kind in "iu", f"the duels should be integer arm indices, got dtype {returned.dtype}"
+    assert np.array_equal(returned, played), \
+        "the returned duels are not the ones played through env.duel: row t should be the (c, d) of the t-th env.duel(c, d)"
+    return played
 
 
 def _bt_instance(rng, k):
@@ -45,11 +65,7 @@ def _uniform_regret(P, horizon, best):
 
 
 def _run(student, P, horizon, seed):
-    _, lent = _bandit(P, seed)
-    pairs = student.eval(RUN, env=lent, horizon=horizon, seed=seed, timeout=60)
-    assert isinstance(pairs, np.ndarray) and pairs.shape == (horizon, 2), \
-        f"rucb should return an array of shape ({horizon}, 2), got {type(pairs).__name__} {np.shape(pairs)}"
-    assert pairs.dtype.kind in "iu", f"the duels should be integer arm indices, got dtype {pairs.dtype}"
+    pairs = _played(student, DuelingBandit(P, seed), horizon, seed)
     assert pairs.min() >= 0 and pairs.max() < len(P), "arm indices out of range"
     return pairs
 
@@ -58,10 +74,6 @@ def _run(student, P, horizon, seed):
 def test_plays_through_the_environment(student, rng):
     """Returns (horizon, 2) integer duels, calls env.duel once per step and explores every arm"""
     P, _ = _bt_instance(rng, 4)
-    env, lent = _bandit(P, 0)
-    student.eval(RUN, env=lent, horizon=300, seed=0, timeout=60)
-    n = env.n_duels
-    assert n == 300, f"rucb should duel exactly once per step through env.duel (300 steps), it dueled {n} times"
     pairs = _run(student, P, 300, 0)
     again = _run(student, P, 300, 0)
     assert np.array_equal(pairs, again), ("two runs with the same rng seed (and the same bandit) dueled differently: draw "
@@ -126,9 +138,7 @@ def test_explores_at_the_rate_of_its_bonus(student, rng):
     best = int(np.argmin(rank))
     counts = []
     for seed in range(3):
-        env = _StrictOrder(rank)
-        pairs = student.eval(RUN, env=lend(env, methods=["duel"], attrs=["n_arms"]), horizon=2000, seed=seed,
-                             timeout=60)
+        pairs = _played(student, _StrictOrder(rank), 2000, seed)
         counts.append(int((np.asarray(pairs) != best).any(axis=1).sum()))
     # A loser j stays a candidate while its bonus against the winner is >= 1/2, N_j <= 4 alpha ln t: about 15 losses
     # each by t = 2,000, so the reference plays 107 to 170 duels that involve a loser; a bonus that shrinks with t
@@ -162,9 +172,7 @@ def test_forgets_a_candidate_that_left_the_set(student):
     forgotten once it leaves the candidate set)"""
     shares, leading = [], []
     for seed in range(2):
-        env = _LeaderFalls(4, 300, 100 + seed)
-        pairs = student.eval(RUN, env=lend(env, methods=["duel"], attrs=["n_arms"]), horizon=3000, seed=seed,
-                             timeout=60)
+        pairs = _played(student, _LeaderFalls(4, 300, 100 + seed), 3000, seed)
         shares.append(float(np.mean(np.asarray(pairs)[-1000:, 0] == 1)))
         leading.append(float(np.mean(np.asarray(pairs)[100:300, 0] == 1)))
     assert min(leading) > 0.5, (f"arm 1 won every duel of the first 300 steps, yet it was the candidate c in only "

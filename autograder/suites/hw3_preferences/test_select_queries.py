@@ -7,7 +7,7 @@ from rlcourse.preferences import random_pairs
 
 HINT = ("For each candidate (a, b): p_k = sigmoid(R_k[a] - R_k[b]) for every member k; rank candidates by the variance "
         "of p over members, largest first; return their row indices (k of them).")
-ENSEMBLE = "RewardEnsemble(11, 3, n_members=5, seed=seed)"
+ENSEMBLE = "rlcourse.preferences.RewardEnsemble"
 
 
 def _pool(rng, n, length, scale=1.0):
@@ -17,9 +17,8 @@ def _pool(rng, n, length, scale=1.0):
 
 
 def _both(student, reference, seed, obs, act, cand, k):
-    expr = f"select_queries({ENSEMBLE}, obs, act, cand, k)"
-    kw = dict(seed=seed, obs=obs, act=act, cand=cand, k=k)
-    return student.eval(expr, **kw), reference.eval(expr, **kw)
+    return tuple(ns.select_queries(ns.helpers.build(ENSEMBLE, 11, 3, n_members=5, seed=seed), obs, act, cand, k)
+                 for ns in (student, reference))
 
 
 @stub("select_queries", points=2, hint=HINT)

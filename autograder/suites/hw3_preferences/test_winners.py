@@ -107,11 +107,13 @@ def test_copeland_random_matches_reference(student, reference, rng):
 
 @stub("borda_winner", points=2, hint=B_HINT)
 def test_borda_hand_made(student, rng):
-    """The instance where the three winners differ (permuted)"""
-    P, inv = _permuted(DIFFER, rng)
-    got = student.borda_winner(P)
-    assert _is_int(got) and got == inv[1], (f"got {_shown(got)}, not the arm with the highest mean P[i, j] over the "
-                                            "K - 1 other arms (the diagonal excluded)")
+    """The instance where the three winners differ, under two permutations that put its Borda winner at different arms"""
+    perm = rng.permutation(len(DIFFER))
+    for shift in (0, 1):                                   # arm a sits at (inv[a] + shift) % K: a constant fails one
+        p = np.roll(perm, shift)
+        got = student.borda_winner(DIFFER[np.ix_(p, p)])
+        assert _is_int(got) and got == np.argsort(p)[1], (f"got {_shown(got)}, not the arm with the highest mean "
+                                                          "P[i, j] over the K - 1 other arms (the diagonal excluded)")
 
 
 @stub("borda_winner", points=1, hint=B_HINT)
