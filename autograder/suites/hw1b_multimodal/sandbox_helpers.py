@@ -10,35 +10,19 @@ import torch
 from torch import nn
 
 
-class LinearPlanner:
-    """chunk[i, j, :] = tanh(obs[i] @ weights[j] + bias[j]): a deterministic planner that logs its calls.
-
-    weights (H, obs_dim, act_dim), bias (H, act_dim). ``rows`` lists the batch size of every call.
-    """
-
-    def __init__(self, weights, bias) -> None:
-        self.weights, self.bias = np.asarray(weights, dtype=np.float64), np.asarray(bias, dtype=np.float64)
-        self.rows = []
-
-    def __call__(self, obs):
-        obs = np.asarray(obs, dtype=np.float64)
-        self.rows.append(len(obs))
-        return np.tanh(np.einsum("nd,hda->nha", obs, self.weights) + self.bias).astype(np.float32)
-
-
-def run_chunked(env, weights, bias, execute: int):
-    """The submission's chunked_rollout with a LinearPlanner: (its Episodes as a dict, the planner's call sizes)."""
-    planner = LinearPlanner(weights, bias)
-    episodes = notebook["chunked_rollout"](planner, env, execute)  # noqa: F821 - set by the worker
+def run_chunked(env, planner, execute: int):
+    """The submission's chunked_rollout with a lent planner (``planner.plan`` runs in the grader, which records its
+    calls) on a lent environment: its Episodes as a dict."""
+    episodes = notebook["chunked_rollout"](planner.plan, env, execute)  # noqa: F821 - set by the worker
     fields = ("obs", "actions", "rewards", "mask", "lengths", "terminated")
-    return {name: getattr(episodes, name, None) for name in fields}, list(planner.rows)
+    return {name: getattr(episodes, name, None) for name in fields}
 
 
 class LinearVelocity(nn.Module):
     """v(a, t, obs) = a @ A + t * b + obs @ C, with a flattened per sample; parameters A, b, C trainable.
 
     A (D, D), b (D,), C (obs_dim, D), where D is the number of entries of one sample's chunk.
-    ``calls`` counts the forward calls; ``times`` keeps a copy of every t it was given.
+    ``inputs`` keeps a copy of the (a, t) of every call (raw data: the tests count and check them).
     """
 
     def __init__(self, A, b, C) -> None:
@@ -46,36 +30,40 @@ class LinearVelocity(nn.Module):
         self.A = nn.Parameter(torch.as_tensor(np.asarray(A), dtype=torch.float64))
         self.b = nn.Parameter(torch.as_tensor(np.asarray(b), dtype=torch.float64))
         self.C = nn.Parameter(torch.as_tensor(np.asarray(C), dtype=torch.float64))
-        self.calls, self.times = 0, []
+        self.inputs = []
 
     def forward(self, a, t, obs):
-        self.calls += 1
-        self.times.append(torch.as_tensor(t).detach().clone())
+        self.inputs.append((torch.as_tensor(a).detach().clone(), torch.as_tensor(t).detach().clone()))
         flat = a.reshape(len(a), -1).to(torch.float64)
         out = flat @ self.A + torch.as_tensor(t, dtype=torch.float64).reshape(-1, 1) * self.b \
             + torch.as_tensor(obs, dtype=torch.float64) @ self.C
         return out.to(a.dtype).reshape(a.shape)
 
 
+def _field_grads(value, field):
+    """d value / d (A, b, C), or None where ``value`` carries no autograd graph (raw data, judged by the test)."""
+    if not (isinstance(value, torch.Tensor) and value.requires_grad):
+        return None
+    return [g.detach() for g in torch.autograd.grad(value.sum(), [field.A, field.b, field.C], allow_unused=True)]
+
+
 def flow_loss_and_grads(A, b, C, obs, chunks, noise, t):
-    """The submission's flow_matching_loss at a LinearVelocity, its gradients (A, b, C) and the number of calls."""
+    """The submission's flow_matching_loss at a LinearVelocity: (loss, its gradients (A, b, C) or None, the (a, t)
+    of every call of the field)."""
     field = LinearVelocity(A, b, C)
     loss = notebook["flow_matching_loss"](field, obs, chunks, noise, t)  # noqa: F821
-    if not isinstance(loss, torch.Tensor) or loss.dim() != 0 or not loss.requires_grad:
-        return loss, None, field.calls
-    grads = torch.autograd.grad(loss, [field.A, field.b, field.C])
-    return loss.detach(), [g.detach() for g in grads], field.calls
+    grads = _field_grads(loss, field)
+    return (loss.detach() if isinstance(loss, torch.Tensor) else loss), grads, field.inputs
 
 
 def euler_with_linear_field(A, b, C, obs, noise, n_steps):
-    """The submission's euler_sample with a LinearVelocity: (result, the times it was called with, noise afterwards,
-    whether the result tracks gradients)."""
+    """The submission's euler_sample with a LinearVelocity: (result, the times it was called with, the noise as the
+    call left it, the gradients of the result's sum with respect to (A, b, C) or None)."""
     field = LinearVelocity(A, b, C)
-    kept = noise.clone()
     out = notebook["euler_sample"](field, obs, noise, n_steps)  # noqa: F821
-    tracks = bool(getattr(out, "requires_grad", False))
+    grads = _field_grads(out, field)
     out = out.detach() if isinstance(out, torch.Tensor) else out
-    return out, [t.to(torch.float64) for t in field.times], bool(torch.equal(kept, noise)), tracks
+    return out, [t.to(torch.float64) for _, t in field.inputs], noise, grads
 
 
 class MLPVelocity(nn.Module):
@@ -96,21 +84,3 @@ class MLPVelocity(nn.Module):
 def euler_with_mlp(dim: int, obs_dim: int, seed: int, obs, noise, n_steps):
     """euler_sample (the namespace's) with an MLPVelocity built from ``seed``."""
     return notebook["euler_sample"](MLPVelocity(dim, obs_dim, seed), obs, noise, n_steps)  # noqa: F821
-
-
-def try_chunked(env, weights, bias, execute: int) -> str:
-    """The name of the exception the submission's chunked_rollout raises with a LinearPlanner, or "no error"."""
-    try:
-        notebook["chunked_rollout"](LinearPlanner(weights, bias), env, execute)  # noqa: F821
-    except Exception as error:  # noqa: BLE001 - the test reads the type's name
-        return type(error).__name__
-    return "no error"
-
-
-def try_call(name: str, *args) -> str:
-    """The name of the exception the submission's ``name(*args)`` raises, or "no error"."""
-    try:
-        notebook[name](*args)  # noqa: F821
-    except Exception as error:  # noqa: BLE001 - the test reads the type's name
-        return type(error).__name__
-    return "no error"

@@ -3,6 +3,7 @@ against what the grader's own copy of the environment received and returned."""
 import numpy as np
 
 from autograder.suite import check_array, lend, stub
+from conftest import raised
 from rlcourse import multimodal as mm
 
 HINT = ("Call env.reset() once; at steps t = 0, k, 2k, ... call plan once on all n observations; at step t run "
@@ -29,6 +30,27 @@ class Recording:
         self.after.append(tuple(np.array(x) for x in out[1:]))
         self.obs.append(np.array(out[0], dtype=np.float32))
         return out
+
+
+class LinearPlanner:
+    """chunk[i, j, :] = tanh(obs[i] @ weights[j] + bias[j]): a deterministic planner, lent to the stub, that keeps the
+    grader's record of its calls (``rows``: the batch size of every call).
+
+    weights (H, obs_dim, act_dim), bias (H, act_dim).
+    """
+
+    def __init__(self, weights, bias) -> None:
+        self.weights, self.bias = np.asarray(weights, dtype=np.float64), np.asarray(bias, dtype=np.float64)
+        self.rows = []
+
+    def plan(self, obs):
+        obs = np.asarray(obs, dtype=np.float64)
+        self.rows.append(len(obs))
+        return np.tanh(np.einsum("nd,hda->nha", obs, self.weights) + self.bias).astype(np.float32)
+
+
+def _lent(planner):
+    return lend(planner, methods=["plan"])
 
 
 class Scripted:
@@ -68,10 +90,10 @@ def _expected(rec, weights, bias, execute):
 
 
 def _run(student, env, weights, bias, execute):
-    rec = Recording(env)
-    out = student.helpers.run_chunked(lend(rec, methods=["reset", "step"], attrs=[]), weights, bias, execute)
-    assert isinstance(out, tuple) and len(out) == 2, "chunked_rollout did not run"
-    episodes, rows = out
+    rec, planner = Recording(env), LinearPlanner(weights, bias)
+    episodes = student.helpers.run_chunked(lend(rec, methods=["reset", "step"], attrs=[]), _lent(planner), execute)
+    assert isinstance(episodes, dict), "chunked_rollout did not run"
+    rows = list(planner.rows)
     for name in ("obs", "actions", "rewards", "mask", "lengths", "terminated"):
         assert isinstance(episodes.get(name), np.ndarray), \
             f"the returned Episodes' {name} should be a numpy array, got {type(episodes.get(name)).__name__}"
@@ -170,10 +192,18 @@ def test_execute_one_is_an_ordinary_policy(student, rng):
 
 @stub("chunked_rollout", points=1, hint="Raise ValueError when execute < 1 or a chunk is shorter than execute (or has the wrong number of rows).")
 def test_refuses_chunks_shorter_than_execute(student, rng):
-    """A chunk of H < execute actions, and execute = 0, raise ValueError"""
+    """A chunk of H < execute actions, and execute = 0, raise ValueError; a chunk of H = execute actions runs"""
     for horizon, execute in ((2, 3), (3, 0)):
         weights, bias = _planner(rng, horizon, 3)
         env = Scripted(np.array([5, 6]), np.array([True, False]), rng.normal(size=(2, 3)))
-        outcome = student.helpers.try_chunked(lend(env, ["reset", "step"]), weights, bias, execute)
+        outcome = raised(student.helpers.run_chunked, lend(env, ["reset", "step"]),
+                         _lent(LinearPlanner(weights, bias)), execute)
         assert outcome == "ValueError", (f"chunks of {horizon} actions with execute={execute} should raise ValueError, "
                                          f"got {outcome}")
+    weights, bias = _planner(rng, 3, 3)
+    rec, ep, _ = _run(student, Scripted(np.array([5, 6]), np.array([True, False]), rng.normal(size=(2, 3))), weights,
+                      bias, 3)
+    check_array(ep["lengths"], np.array([5, 6]), name="the lengths with chunks of exactly execute = 3 actions (valid)")
+    want = _expected(rec, weights, bias, 3)
+    check_array(np.stack(rec.actions)[:, 1], want[:, 1], rtol=1e-5, atol=1e-5,
+                name="the actions with chunks of exactly execute = 3 actions (valid)")

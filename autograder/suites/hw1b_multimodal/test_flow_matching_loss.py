@@ -37,10 +37,10 @@ def _call(student, inst):
     tensors = [torch.as_tensor(x, dtype=torch.float64) for x in (obs, chunks, noise, t)]
     out = student.helpers.flow_loss_and_grads(A, b, C, *tensors)
     assert isinstance(out, tuple) and len(out) == 3, "flow_matching_loss did not run"
-    loss, grads, calls = out
+    loss, grads, inputs = out
     assert type(loss) is torch.Tensor and loss.shape == (), \
         f"flow_matching_loss should return a 0-dimensional torch tensor, got {type(loss).__name__} {getattr(loss, 'shape', '')}"
-    return loss, grads, calls
+    return loss, grads, inputs
 
 
 @stub("flow_matching_loss", points=3, hint=HINT)
@@ -57,7 +57,8 @@ def test_gradient_at_a_linear_field(student, rng):
     """The gradients with respect to the field's parameters equal their closed forms"""
     inst = _instance(rng, 9, (2, 2))
     _, grads, _ = _call(student, inst)
-    assert grads is not None, "the loss should be a tensor that requires grad (through the velocity network)"
+    assert grads is not None and all(g is not None for g in grads), \
+        "the loss should be a tensor that requires grad (through the velocity network)"
     _, gA, gb, gC = _closed_form(*inst)
     for name, g, w in zip(("A", "b", "C"), grads, (gA, gb, gC)):
         check_array(g.numpy(), w, rtol=1e-6, atol=1e-9, name=f"the gradient with respect to {name}")
@@ -65,10 +66,18 @@ def test_gradient_at_a_linear_field(student, rng):
 
 @stub("flow_matching_loss", points=1, hint="Give the velocity each sample's own t (shape (N,)) and call it once on the whole batch.")
 def test_one_call_on_the_whole_batch(student, rng):
-    """The velocity is called exactly once"""
+    """The velocity is called exactly once, on the whole batch of points a_t with each sample's own t"""
     inst = _instance(rng, 6, (3, 1))
-    _, _, calls = _call(student, inst)
-    assert calls == 1, f"call the velocity network once on the whole batch, it was called {calls} times"
+    _, _, inputs = _call(student, inst)
+    assert isinstance(inputs, list) and len(inputs) == 1, \
+        f"call the velocity network once on the whole batch, it was called {len(inputs)} times"
+    a_t, t = inputs[0]
+    _, _, _, _, chunks, noise, times = inst
+    check_array(t.numpy().astype(np.float64).reshape(-1), times, rtol=1e-12, atol=0,
+                name="the t given to the velocity (each sample's own t, shape (N,))")
+    want = (1 - times)[:, None, None] * noise + times[:, None, None] * chunks
+    check_array(a_t.numpy().astype(np.float64).reshape(len(want), -1), want.reshape(len(want), -1), rtol=1e-9,
+                atol=1e-12, name="the points a_t given to the velocity")
     loss, _, _ = _call(student, inst)
     check_scalar(float(loss), _closed_form(*inst)[0], rtol=1e-6, name="the loss")
 

@@ -2,6 +2,7 @@
 import numpy as np
 
 from autograder.suite import check_scalar, stub
+from conftest import raised
 
 HINT = ("left/right/not_passed are fractions of the policy's n episodes; coverage = (min(p_left, q_left) + "
         "min(p_right, q_right)) / (q_left + q_right) with q the expert's fractions of its own m episodes.")
@@ -70,5 +71,10 @@ def test_refuses_bad_input(student, rng):
              "a label of 2": (np.array([1, 2, -1]), _labels(rng, 5, [0.5, 0.5, 0.0])),
              "an expert that never passed": (_labels(rng, 6, [0.5, 0.5, 0.0]), np.zeros(4, dtype=np.int64))}
     for what, (sides, expert) in cases.items():
-        outcome = student.helpers.try_call("mode_coverage", sides, expert)
+        outcome = raised(student.mode_coverage, sides, expert)
         assert outcome == "ValueError", f"{what} should raise ValueError, got {outcome}"
+    sides, expert = _labels(rng, 12, [0.4, 0.4, 0.2]), _labels(rng, 9, [0.5, 0.3, 0.2])
+    p, coverage = _want(sides, expert)
+    got = _call(student, sides, expert)
+    check_scalar(got["left"], p[1], rtol=1e-9, name="'left' on valid labels (which should not raise)")
+    check_scalar(got["coverage"], coverage, rtol=1e-9, name="'coverage' on valid labels (which should not raise)")
