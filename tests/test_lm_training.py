@@ -113,7 +113,7 @@ def test_train_reward_model_fits_pairs_with_the_given_loss_and_standardises(hw5)
     assert abs(float(s.mean())) < 1e-4 and abs(float(s.std()) - 1) < 1e-4
     assert float((s[:48] > s[48:]).float().mean()) > 0.8, "the fitted model should rank its training pairs"
     zero = L.fit_reward_model(sft, chosen, rejected, lambda c, r: 0.0 * (c - r).sum(), steps=5, seed=0, batch=16)
-    head = float(zero.head.weight.abs().sum() + zero.head.bias.abs().sum())
+    head = float(zero.head.weight.detach().abs().sum() + zero.head.bias.detach().abs().sum())
     assert head == 0.0, "the loop must use the given loss (the zero-initialised head had no gradient to follow)"
 
 
