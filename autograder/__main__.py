@@ -3,6 +3,8 @@
   grade ID NOTEBOOK --out DIR        grade one submission; per-stub summary, results.json, feedback.md
   batch ID FOLDER --out DIR --jobs N grade a folder (resumable), write gradebook.csv
         [--shard K/N]                only the submissions of shard K of N (one copy per machine)
+  batch ID1,ID2 FOLDER --out DIR     several assignments in one pool (start-up once), each into DIR/ID/;
+  batch --all FOLDER --out DIR       every assignment handed in (nbgrader's submitted/<student>/<id>/)
   merge ID SHARD_DIR ... --out DIR   join the shards of a batch into one gradebook (refuses a mismatch)
   prairielearn ID [--root /grade]    grade as PrairieLearn's external grader (results/results.json);
         [--question-files DIR]       or write the question's files for a PrairieLearn course
@@ -88,32 +90,53 @@ def _warn_isolation(level: str) -> None:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from autograder.core.batch import Shard, missing_submissions
+    from autograder.core.batch import Shard, assignment_folder, assignments_in, missing_submissions
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
-    from autograder.outputs.checkout import require_one_checkout
     from autograder.outputs.files import grade_folder
     from autograder.outputs.text import plain
 
-    require_one_checkout()
     try:
         shard = Shard.parse(args.shard) if args.shard else Shard()
     except ValueError as err:
         raise SystemExit(str(err)) from err
-    results = grade_folder(args.assignment, args.folder, args.out, jobs=args.jobs, shard=shard)
-    _warn_isolation("none" if any(r.isolation == "none" for r in results) else "full")
-    count = {status: sum(r.status == status for r in results) for status in (GRADED, UNGRADABLE, GRADER_ERROR)}
-    print(f"{len(results)} submissions ({count[GRADED]} graded, {count[UNGRADABLE]} ungradable, "
-          f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {args.out / shard.gradebook_name}"
-          + (f"\nshard {shard.k} of {shard.n}: join the shards with python -m autograder merge" if shard.n > 1 else ""))
-    missing = [m for m in missing_submissions(args.folder, args.assignment) if shard.owns(m)]
-    if missing:
-        listed = ", ".join(plain(m) for m in missing[:20]) + (f" and {len(missing) - 20} more" if len(missing) > 20 else "")
-        print(f"{len(missing)} student folder(s) hold no {args.assignment}/ (not handed in; not graded, not in the "
-              f"gradebook): {listed}")
-    if count[GRADER_ERROR]:
-        failed = next(r for r in results if r.status == GRADER_ERROR)
-        print(f"the grader failed on {count[GRADER_ERROR]} submission(s), e.g. {plain(failed.submission)}: "
-              f"{plain(failed.error or '')}\n"
+    if args.all:  # batch --all FOLDER --out DIR: the folder came first
+        if args.folder is not None:
+            raise SystemExit("batch --all takes the folder only: python -m autograder batch --all FOLDER --out DIR")
+        args.folder = Path(args.assignment)
+        ids = assignments_in(args.folder)
+        if not ids:
+            raise SystemExit(f"no gradable assignment was handed in under {args.folder}")
+    else:
+        if args.folder is None:
+            raise SystemExit("batch needs a folder of submissions: python -m autograder batch ID FOLDER --out DIR")
+        ids = [i.strip() for i in args.assignment.split(",") if i.strip()]
+    several = args.all or len(ids) > 1
+    if several:  # one pool for them all: the grader's start-up once, each assignment into --out/<id>/
+        by_assignment = grade_folder(ids, args.folder, args.out, jobs=args.jobs, shard=shard)
+    else:
+        by_assignment = {ids[0]: grade_folder(ids[0], args.folder, args.out, jobs=args.jobs, shard=shard)}
+    every = [r for results in by_assignment.values() for r in results]
+    _warn_isolation("none" if any(r.isolation == "none" for r in every) else "full")
+    for assignment, results in by_assignment.items():
+        out = args.out / assignment if several else args.out
+        count = {status: sum(r.status == status for r in results) for status in (GRADED, UNGRADABLE, GRADER_ERROR)}
+        print((f"{assignment}: " if several else "")
+              + f"{len(results)} submissions ({count[GRADED]} graded, {count[UNGRADABLE]} ungradable, "
+              f"{count[GRADER_ERROR]} not graded because the grader failed); gradebook: {out / shard.gradebook_name}"
+              + (f"\nshard {shard.k} of {shard.n}: join the shards with python -m autograder merge"
+                 if shard.n > 1 and not several else ""))
+        folder = assignment_folder(args.folder, assignment) if several else args.folder
+        missing = [m for m in missing_submissions(folder, assignment) if shard.owns(m)]
+        if missing:
+            listed = ", ".join(plain(m) for m in missing[:20]) + (f" and {len(missing) - 20} more" if len(missing) > 20 else "")
+            print(f"{len(missing)} student folder(s) hold no {assignment}/ (not handed in; not graded, not in the "
+                  f"gradebook): {listed}")
+    if shard.n > 1 and several:
+        print(f"shard {shard.k} of {shard.n}: join each assignment's shards with python -m autograder merge")
+    failed = [r for r in every if r.status == GRADER_ERROR]
+    if failed:
+        print(f"the grader failed on {len(failed)} submission(s), e.g. {plain(failed[0].submission)}: "
+              f"{plain(failed[0].error or '')}\n"
               "their rows have status grader_error and no score; fix the grader and run the same command again "
               "to grade just those", file=sys.stderr)
         return GRADER_FAULT_EXIT
@@ -208,9 +231,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("notebook", type=Path)
     p.add_argument("--out", type=Path, required=True)
     p.set_defaults(fn=_cmd_grade)
-    p = sub.add_parser("batch", help="grade a folder of submissions")
-    p.add_argument("assignment")
-    p.add_argument("folder", type=Path)
+    p = sub.add_parser("batch", help="grade a folder of submissions (of one assignment, or several at once)")
+    p.add_argument("assignment", metavar="ID[,ID...]",
+                   help="the assignment, or several separated by commas (graded in one pool: start-up paid once)")
+    p.add_argument("folder", type=Path, nargs="?", help="the submissions (for several: nbgrader's layout, or ID/ each)")
+    p.add_argument("--all", action="store_true",
+                   help="every assignment handed in under the folder (batch --all FOLDER --out DIR); each into DIR/ID/")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--shard", default=None, metavar="K/N",

@@ -13,6 +13,17 @@ grows with the number of submissions:
     T(200) = T(start) + (T(N) - T(start)) * 200 / N
 
 Prints a Markdown table; ``--record`` writes ``bench/results/class_throughput.json``.
+
+``--per-test`` also records, for every hidden test of each assignment, where its time goes: graded once
+against the complete sample in this process (a fresh grader, so the reference's answers are computed
+once, as for a batch's first submission), its wall time, the worker's CPU (its main thread), the
+grader's CPU (its main thread) and its channel messages; and graded against the reference alone (the
+solution's own namespace as the student, in this process, no sandbox, a fresh reference cache, the same
+hidden inputs), its wall and CPU time: the floor a grading is measured against. It grades the looping
+sample once too (what a stub that never returns costs). CPU times are the figures to read on a loaded
+machine; every assignment's record carries the load it was measured at.
+
+    python bench/bench_class_throughput.py --n 4 --ids hw0_setup hw3_preferences --per-test --record
 """
 from __future__ import annotations
 
@@ -45,7 +56,8 @@ def make_class(folder: Path, assignment: str, n: int, kinds: dict[str, int] | No
 
 
 def timed_batch(assignment: str, folder: Path, out: Path, jobs: int) -> tuple[float, float]:
-    """Wall seconds and CPU seconds (this batch's processes) of one ``batch`` run."""
+    """Wall seconds and CPU seconds (this batch's processes) of one ``batch`` run (``assignment`` may be
+    several, comma-separated)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "autograder", "batch", assignment, str(folder), "--out", str(out),
@@ -73,6 +85,98 @@ def overhead(assignment: str = "hw0_setup", sample: str = "untouched", repeats: 
     return sorted(times)[repeats // 2]
 
 
+EARLIER_META = {"commit": "not recorded (the rows were committed in 0a6f337, 2026-12-02)", "date": "not recorded",
+                "load": "per row (its load column)", "machine": "2-core CPU"}
+"""Provenance of a whole-class run recorded before this file carried a ``meta`` object."""
+
+
+def startup(ids: list[str], jobs: int) -> dict:
+    """What the batch's start-up costs graded one assignment at a time against all in one batch: a class of
+    one untouched notebook per assignment (so start-up is nearly all of it), wall and CPU of every process
+    the batches ran (``RUSAGE_CHILDREN``: the CLI, its pool, the zygotes and workers)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        for assignment in ids:
+            make_class(root / "in" / assignment, assignment, 1, {"untouched": 1})
+        separate = {a: timed_batch(a, root / "in" / a, root / "separate" / a, jobs) for a in ids}
+        wall, cpu = timed_batch(",".join(ids), root / "in", root / "together", jobs)
+    return {"meta": meta(), "assignments": ids, "jobs": jobs,
+            "one_batch_per_assignment": {"wall": round(sum(w for w, _ in separate.values()), 2),
+                                         "cpu": round(sum(c for _, c in separate.values()), 2),
+                                         "per_assignment": {a: {"wall": round(w, 2), "cpu": round(c, 2)}
+                                                            for a, (w, c) in separate.items()}},
+            "one_batch_for_all": {"wall": round(wall, 2), "cpu": round(cpu, 2)}}
+
+
+def _commit() -> str:
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO).stdout.strip()
+
+
+def meta() -> dict:
+    import datetime
+
+    return {"commit": _commit(), "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
+            "machine": "2-core CPU"}
+
+
+def _rounded(stats: dict[str, float]) -> dict[str, float]:
+    return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in stats.items()}
+
+
+def per_test(assignment: str) -> dict:
+    """Per hidden test: the complete sample graded in a sandbox, and the reference alone (see the docstring)."""
+    from autograder.core import course
+    from autograder.core.grader import Grader, SuitePlugin, build_reference, input_key
+    from autograder.core.intake import read_code_cells
+    from autograder.core.notebook import find_stubs
+    from autograder.core.session import LocalTransport, Namespace, ReferenceCache
+
+    samples = course.samples_dir(assignment)
+    load_before = list(os.getloadavg())
+    grader = Grader(assignment)
+    try:
+        cpu, wall = time.process_time(), time.perf_counter()
+        result = grader.grade(samples / "complete.ipynb")
+        complete_wall, complete_cpu = time.perf_counter() - wall, time.process_time() - cpu
+        complete = grader.last_test_stats
+        wall = time.perf_counter()
+        looping = grader.grade(samples / "infinite_loop.ipynb")
+        looping_wall = time.perf_counter() - wall
+        timeouts = {node: round(s["span"], 2) for node, s in grader.last_test_stats.items()
+                    if "span" in s and s["span"] >= 0.8 * s.get("limit", 1e9)}
+        stubs = {name: m for name, m in find_stubs(read_code_cells(samples / "complete.ipynb")[0], grader.expected)[0].items()
+                 if not m.problem}
+        alone = build_reference(assignment)
+        plugin = SuitePlugin(Namespace(LocalTransport(alone, grader.helpers), "student"),
+                             Namespace(LocalTransport(grader.reference_ns, grader.helpers, ReferenceCache()), "reference"),
+                             {}, None, grader.dependencies, input_key(grader.version, stubs))
+        cpu, wall = time.process_time(), time.perf_counter()
+        grader._run_suite(plugin)
+        alone_wall, alone_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    finally:
+        grader.close()
+    tests = {}
+    for node in sorted(set(complete) | set(plugin.test_stats)):
+        c, r = complete.get(node, {}), plugin.test_stats.get(node, {})
+        tests[node] = {"complete": _rounded({"wall": c.get("span", c.get("seconds")), "worker_cpu": c.get("worker_cpu"),
+                                             "grader_cpu": c.get("grader_cpu"), "messages": c.get("messages"),
+                                             "limit": c.get("limit")}),
+                       "reference_alone": _rounded({"wall": r.get("seconds"), "cpu": r.get("grader_cpu")})}
+    sum_of = lambda side, key: round(sum((t[side].get(key) or 0) for t in tests.values()), 3)  # noqa: E731
+    return {"meta": {**meta(), "load_before": load_before},
+            "complete": {"score": result.score, "max_score": result.max_score, "wall": round(complete_wall, 3),
+                         "grading_process_cpu": round(complete_cpu, 3), "tests_wall": sum_of("complete", "wall"),
+                         "tests_worker_cpu": sum_of("complete", "worker_cpu"),
+                         "tests_grader_cpu": sum_of("complete", "grader_cpu"),
+                         "tests_messages": sum_of("complete", "messages")},
+            "reference_alone": {"passed": sum(o.passed for o in plugin.outcomes), "tests": len(plugin.outcomes),
+                                "wall": round(alone_wall, 3), "cpu": round(alone_cpu, 3),
+                                "tests_cpu": sum_of("reference_alone", "cpu")},
+            "infinite_loop": {"score": looping.score, "max_score": looping.max_score, "wall": round(looping_wall, 3),
+                              "tests_near_their_limit": timeouts},
+            "tests": tests}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, default=20)
@@ -81,6 +185,10 @@ def main() -> None:
     parser.add_argument("--record", action="store_true")
     parser.add_argument("--overhead", action="store_true",
                         help="only time grading hw0's untouched sample with a warm grader (median of 3)")
+    parser.add_argument("--startup", action="store_true",
+                        help="only compare the start-up of one batch per assignment with one batch for them all")
+    parser.add_argument("--per-test", action="store_true",
+                        help="also record where each hidden test's time goes (complete sample and reference alone)")
     parser.add_argument("--no-reference-cache", action="store_true",
                         help="recompute the reference's answers for every submission (as if hidden inputs varied)")
     args = parser.parse_args()
@@ -94,6 +202,20 @@ def main() -> None:
         return
 
     ids = args.ids or [i for i in course.assignment_ids() if course.suite_dir(i).is_dir()]
+    if args.startup:
+        found = startup(ids, args.jobs)
+        print(f"start-up of {len(ids)} assignments: one batch each {found['one_batch_per_assignment']['wall']:.0f} s wall, "
+              f"{found['one_batch_per_assignment']['cpu']:.0f} s CPU; one batch for all "
+              f"{found['one_batch_for_all']['wall']:.0f} s wall, {found['one_batch_for_all']['cpu']:.0f} s CPU "
+              f"(load {os.getloadavg()[0]:.1f})")
+        if args.record:
+            out = REPO / "bench" / "results" / "class_throughput.json"
+            data = json.loads(out.read_text()) if out.exists() else {}
+            data.setdefault("meta", EARLIER_META)
+            data["startup_once"] = found
+            out.write_text(json.dumps(data, indent=1) + "\n")
+            print(f"wrote {out}")
+        return
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for assignment in ids:
@@ -115,11 +237,34 @@ def main() -> None:
               f"{r['extrapolated_200'] / 60:.1f} min |")
     print(f"| all | {sum(r['n'] for r in rows)} | {total:.0f} s | {sum(r['cpu'] for r in rows):.0f} s | | "
           f"{total_200 / 60:.1f} min |")
+    details = {}
+    if args.per_test:
+        for assignment in ids:
+            details[assignment] = per_test(assignment)
+            d = details[assignment]
+            print(f"{assignment}: complete {d['complete']['wall']:.1f} s wall, {d['complete']['tests_grader_cpu']:.1f} s "
+                  f"grader CPU + {d['complete']['tests_worker_cpu']:.1f} s worker CPU in tests, "
+                  f"{d['complete']['tests_messages']:.0f} messages; reference alone {d['reference_alone']['cpu']:.1f} s "
+                  f"CPU; looping sample {d['infinite_loop']['wall']:.1f} s", flush=True)
     if args.record:
         name = "class_throughput_no_cache.json" if args.no_reference_cache else "class_throughput.json"
         out = REPO / "bench" / "results" / name
-        out.write_text(json.dumps({"args": vars(args), "mix_per_20": MIX, "rows": rows, "total_wall": total,
-                                   "extrapolated_200_total": total_200}, indent=1) + "\n")
+        earlier = json.loads(out.read_text()) if out.exists() else {}
+        run = {"args": vars(args), "mix_per_20": MIX, "rows": rows, "total_wall": total,
+               "extrapolated_200_total": total_200, "meta": meta()}
+        earlier_ids = {r["assignment"] for r in earlier.get("rows", [])}
+        smaller = bool(earlier.get("rows")) and (args.n < earlier.get("args", {}).get("n", 0) or not earlier_ids <= set(ids))
+        if smaller:  # a small class does not replace the last whole-class measurement: it goes beside it
+            data = dict(earlier)
+            data.setdefault("meta", EARLIER_META)
+            data["small_class_run"] = run
+        else:
+            data = run
+        if details:
+            data["per_test"] = {**(earlier.get("per_test", {}) if smaller else {}), **details}
+        elif "per_test" in earlier:
+            data["per_test"] = earlier["per_test"]
+        out.write_text(json.dumps(data, indent=1) + "\n")
         print(f"wrote {out}")
 
 

@@ -249,17 +249,34 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
 # ------------------------------------------------------------------ worker processes
 
 _grader: Grader | None = None
-
-
 _grader_failure: str | None = None
+_grader_of: str | None = None
+"""The assignment this process's grader (or its failure to build) is for."""
+_hide_by_assignment: dict[str, list[str]] | None = None
+"""Set when this process grades several assignments: what each one hides; its grader is then built on demand."""
 
 
-def _init(assignment: str, hide: list[str]) -> None:
-    global _grader, _grader_failure
+def _build(assignment: str, hide: list[str]) -> None:
+    global _grader, _grader_failure, _grader_of
+    if _grader is not None:  # one grader at a time: its zygote and reference go before the next is built
+        _grader.close()
+        _grader = None
+    _grader_failure, _grader_of = None, assignment
     try:
         _grader = Grader(assignment, hide=[Path(h) for h in hide])
     except GraderError as err:  # every submission this process takes is then a grader error
         _grader_failure = str(err)
+
+
+def _init(assignment: str, hide: list[str]) -> None:
+    _build(assignment, hide)
+
+
+def _init_many(hide_by_assignment: dict[str, list[str]]) -> None:
+    """A process of a batch over several assignments: it imports the grader's modules once, and builds each
+    assignment's grader when its first submission of that assignment comes (they come in assignment order)."""
+    global _hide_by_assignment
+    _hide_by_assignment = hide_by_assignment
 
 
 def _finish(result: GradeResult, folder: Path, write: Writer | None) -> None:
@@ -271,6 +288,8 @@ def _finish(result: GradeResult, folder: Path, write: Writer | None) -> None:
 
 
 def _grade_one(entry: Entry, out_dir: str, assignment: str, write: Writer | None) -> str:
+    if _hide_by_assignment is not None and _grader_of != assignment:
+        _build(assignment, _hide_by_assignment[assignment])
     if _grader is None:
         result = _unscored(assignment, entry, _grader_failure or "the grader could not be built", GRADER_ERROR)
     else:
@@ -312,6 +331,69 @@ def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list
     atomic_write(out_dir / shard.manifest_name, json.dumps(manifest, indent=1))
 
 
+@dataclass(frozen=True)
+class Batch:
+    """One assignment's part of a batch: its submissions' folder, its output folder, its shard."""
+    assignment: str
+    folder: Path
+    out_dir: Path
+    shard: Shard = Shard()
+
+
+def _prepare(batch: Batch, write: Writer | None) -> tuple[list[Entry], list[Entry]]:
+    """Discover ``batch``'s submissions, write its manifest and the results of those with nothing to grade:
+    its entries, and those still to grade."""
+    out_dir, assignment, shard = Path(batch.out_dir), batch.assignment, batch.shard
+    course.check_assignment(assignment)
+    expected = course.stub_names(assignment)
+    entries = discover(batch.folder, assignment, expected)
+    all_names = [e.name for e in entries]
+    entries = [e for e in entries if shard.owns(e.name)]
+    write_manifest(out_dir, assignment, shard, all_names, [e.name for e in entries],
+                   [m for m in missing_submissions(batch.folder, assignment) if shard.owns(m)])
+    todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
+    for e in entries:
+        if e.notebook is None and not _done(out_dir, e.name):
+            _finish(_unscored(assignment, e, e.problem, UNGRADABLE), out_dir / e.name, write)
+    return entries, todo
+
+
+def _hide(batch: Batch) -> list[str]:
+    """Classmates' notebooks and the results are hidden from the sandbox even inside a released folder."""
+    return [str(Path(batch.folder).resolve()), str(Path(batch.out_dir).resolve())]
+
+
+def _grade(tasks: list[tuple[Batch, Entry]], write: Writer | None, jobs: int, progress: Progress | None,
+           description: str, initializer: Callable, initargs: tuple) -> None:
+    """Grade every (batch, entry) in a pool of ``jobs`` processes, retrying what a dying process left undone."""
+    todo = list(tasks)
+    attempts = 0
+    while todo and attempts < 3:
+        attempts += 1
+        try:
+            with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=initializer,
+                                     initargs=initargs) as pool:
+                futures = {pool.submit(_grade_one, e, str(b.out_dir), b.assignment, write): (b, e) for b, e in todo}
+                finished = as_completed(futures)
+                if progress is not None:
+                    finished = progress(finished, len(futures), description)
+                for future in finished:
+                    batch, entry = futures[future]
+                    try:
+                        future.result()
+                    except BrokenProcessPool:
+                        raise
+                    except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission, nor grade it
+                        _finish(_unscored(batch.assignment, entry, f"internal grader error: {err}", GRADER_ERROR),
+                                Path(batch.out_dir) / entry.name, write)
+        except BrokenProcessPool:
+            pass  # a grading process died; the finished results are on disk, retry the rest
+        todo = [(b, e) for b, e in todo if _load(Path(b.out_dir), e.name) is None]
+    for batch, e in todo:
+        _finish(_unscored(batch.assignment, e, "the grading process died repeatedly on this submission", GRADER_ERROR),
+                Path(batch.out_dir) / e.name, write)
+
+
 def run_batch(assignment: str, folder: Path, out_dir: Path, *, write: Writer | None = None, jobs: int = 2,
               progress: Progress | None = None, shard: Shard = Shard()) -> list[GradeResult]:
     """Grade every submission (of ``shard``) not yet graded in ``out_dir``; the results of them all, by name.
@@ -320,43 +402,50 @@ def run_batch(assignment: str, folder: Path, out_dir: Path, *, write: Writer | N
     writes its own manifest, so N shards may share one ``out_dir`` on a shared disk or each have their own.
     The gradebook is the writers' (``autograder.outputs.files.grade_folder`` writes one).
     """
-    out_dir = Path(out_dir)
-    course.check_assignment(assignment)
-    expected = course.stub_names(assignment)
-    entries = discover(folder, assignment, expected)
-    all_names = [e.name for e in entries]
-    entries = [e for e in entries if shard.owns(e.name)]
-    write_manifest(out_dir, assignment, shard, all_names, [e.name for e in entries],
-                   [m for m in missing_submissions(folder, assignment) if shard.owns(m)])
-    todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
-    for e in entries:
-        if e.notebook is None and not _done(out_dir, e.name):
-            _finish(_unscored(assignment, e, e.problem, UNGRADABLE), out_dir / e.name, write)
-    attempts = 0
-    while todo and attempts < 3:
-        attempts += 1
-        try:
-            # Classmates' notebooks and the results are hidden from the sandbox even inside a released folder.
-            hide = [str(Path(folder).resolve()), str(out_dir.resolve())]
-            with ProcessPoolExecutor(max(1, jobs), mp_context=mp.get_context("spawn"), initializer=_init,
-                                     initargs=(assignment, hide)) as pool:
-                futures = {pool.submit(_grade_one, e, str(out_dir), assignment, write): e for e in todo}
-                finished = as_completed(futures)
-                if progress is not None:
-                    finished = progress(finished, len(futures), f"grading {assignment}")
-                for future in finished:
-                    entry = futures[future]
-                    try:
-                        future.result()
-                    except BrokenProcessPool:
-                        raise
-                    except Exception as err:  # noqa: BLE001 - a grader bug must not drop the submission, nor grade it
-                        _finish(_unscored(assignment, entry, f"internal grader error: {err}", GRADER_ERROR),
-                                out_dir / entry.name, write)
-        except BrokenProcessPool:
-            pass  # a grading process died; the finished results are on disk, retry the rest
-        todo = [e for e in todo if _load(out_dir, e.name) is None]
-    for e in todo:
-        _finish(_unscored(assignment, e, "the grading process died repeatedly on this submission", GRADER_ERROR),
-                out_dir / e.name, write)
-    return [r for e in entries if (r := _load(out_dir, e.name)) is not None]
+    batch = Batch(assignment, Path(folder), Path(out_dir), shard)
+    entries, todo = _prepare(batch, write)
+    if todo:
+        _grade([(batch, e) for e in todo], write, jobs, progress, f"grading {assignment}", _init,
+               (assignment, _hide(batch)))
+    return [r for e in entries if (r := _load(batch.out_dir, e.name)) is not None]
+
+
+def run_batches(batches: list[Batch], *, write: Writer | None = None, jobs: int = 2,
+                progress: Progress | None = None) -> dict[str, list[GradeResult]]:
+    """:func:`run_batch` for several assignments in one pool of processes: each process imports the grader
+    once (the start-up a batch per assignment pays again for each), and builds an assignment's grader when
+    the first of its submissions comes; submissions go in assignment order, so that is about once each.
+    The results of each assignment, by assignment."""
+    if len({b.assignment for b in batches}) != len(batches):
+        raise ValueError("each assignment once in a batch of several")
+    prepared = [(b, *_prepare(b, write)) for b in batches]
+    tasks = [(b, e) for b, _, todo in prepared for e in todo]
+    if tasks:
+        names = [b.assignment for b in batches if any(t[0] is b for t in tasks)]
+        _grade(tasks, write, jobs, progress, "grading " + ", ".join(names), _init_many,
+               ({b.assignment: _hide(b) for b in batches},))
+    return {b.assignment: [r for e in entries if (r := _load(b.out_dir, e.name)) is not None]
+            for b, entries, _ in prepared}
+
+
+def assignment_folder(folder: Path, assignment: str) -> Path:
+    """Where ``assignment``'s submissions lie in a batch over several: nbgrader's layout holds every
+    assignment (``submitted/<student>/<assignment>/``), so ``folder`` itself; else ``folder/<assignment>/``."""
+    folder = Path(folder)
+    inner = submissions_folder(folder)
+    if inner.name == "submitted" or (_nbgrader_layout(inner, assignment) and not (folder / assignment).is_dir()):
+        return folder
+    if (folder / assignment).is_dir():
+        return folder / assignment
+    raise SystemExit(f"{folder} is neither nbgrader's layout (submitted/<student>/<assignment>/) nor holds a folder "
+                     f"{assignment}/ of submissions")
+
+
+def assignments_in(folder: Path) -> list[str]:
+    """The gradable assignments that some student handed in, in nbgrader's layout under ``folder`` (or with a
+    folder of their own in it), in course order."""
+    folder = Path(folder)
+    inner = submissions_folder(folder)
+    gradable = [a for a in course.assignment_ids() if course.suite_dir(a).is_dir()]
+    students = _student_folders(inner)
+    return [a for a in gradable if (folder / a).is_dir() or any((s / a).is_dir() for s in students)]

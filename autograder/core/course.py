@@ -52,14 +52,39 @@ def stub_names(assignment: str) -> list[str]:
     return [c.label for c in release_plan(read_notebook(release_notebook(assignment))) if c.kind == "stub"]
 
 
-def limits(assignment: str) -> "Limits":
-    """The sandbox limits of an assignment: defaults, overridden by its suite's ``limits.json``."""
+PER_TEST_KEYS = ("tests", "tests_reference")
+"""The keys of ``limits.json`` that are not fields of ``Limits``: each hidden test's own limit, and the reference's
+measured time it came from (see :func:`per_test_limits`)."""
+
+
+def _limits_json(assignment: str) -> dict:
     import json
 
+    path = suite_dir(assignment) / "limits.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def limits(assignment: str) -> "Limits":
+    """The sandbox limits of an assignment: defaults, overridden by its suite's ``limits.json``."""
     from autograder.sandbox.config import Limits
 
-    path = suite_dir(assignment) / "limits.json"
-    return Limits(**json.loads(path.read_text())) if path.exists() else Limits()
+    raw = _limits_json(assignment)
+    return Limits(**{k: v for k, v in raw.items() if k not in PER_TEST_KEYS})
+
+
+def per_test_limits(assignment: str) -> dict[str, float]:
+    """Each hidden test's own time limit in seconds, by pytest node id (``test_rucb.py::test_regret``), from the
+    ``"tests"`` object of the suite's ``limits.json``; a test not named there has ``test_seconds``.
+
+    The rule that wrote them (``python -m autograder.authoring.limits ID``): the complete sample is graded once,
+    and a test whose reference run took ``t`` seconds of its own (its wall time from its start to its end, less
+    the time the worker and the grader spent waiting for a busy CPU) gets ``MULTIPLE * t + CONSTANT`` seconds
+    (``autograder/authoring/limits.py``), never more than ``test_seconds``. The CPU-wait credit of every
+    deadline applies on top, as for any limit. A test's own limit bounds all of its calls, those with a
+    suite's own ``timeout`` too, but not the cells re-run after a crash.
+    """
+    tests = _limits_json(assignment).get("tests", {})
+    return {str(k): float(v) for k, v in tests.items()}
 
 
 STUDENT_RELEASE = ("assignments", "lectures", "rlcourse", "datasets")

@@ -102,13 +102,20 @@ class SuitePlugin:
 
     def __init__(self, student: Namespace, reference: Namespace, status: dict[str, CellStatus],
                  session: Session | None = None, dependencies: dict[str, list[str]] | None = None,
-                 input_key: int = 0) -> None:
+                 input_key: int = 0, test_limits: dict[str, float] | None = None) -> None:
         self.student_ns, self.reference_ns, self.status = student, reference, status
         self.session, self.dependencies = session, dependencies or {}
         self.input_key = input_key
+        self.test_limits = test_limits or {}
+        """Each test's own time limit by node id (``limits.json``'s ``"tests"``); others have ``test_seconds``."""
         self.outcomes: list[TestOutcome] = []
         self.grader_faults: list[str] = []
         self.collected: list[tuple[Any, pytest.Item]] = []
+        self.test_stats: dict[str, dict[str, float]] = {}
+        """Per test (node id): ``seconds`` (wall of its body), ``grader_cpu`` and ``grader_wait`` (the grader's
+        main thread: CPU, and time runnable but waiting for one), and with a sandbox ``span`` (wall from the
+        test's start to its end, fixture included: what its limit counts), ``messages``, ``worker_cpu``,
+        ``credit`` (the worker's CPU wait forgiven) and ``limit``. Cheap: a few clock reads per test."""
 
     def pytest_collection_modifyitems(self, items: list[pytest.Item]) -> None:
         self.collected = [(i.get_closest_marker("stub"), i) for i in items]
@@ -124,14 +131,16 @@ class SuitePlugin:
         if status is not None and not status.ok:
             raise CellNotRun(status)
         if self.session is not None:  # from here, the test's calls share one deadline
-            self.session.begin_test()
+            self.session.begin_test(self.test_limits.get(request.node.nodeid))
         # The other stubs this one calls run as the reference while it is tested: one mistake, one loss.
         needed = self.dependencies.get(stub, [])
         if self.session is not None and needed:
             self.session.stand_in(needed)
         yield self.student_ns
         if self.session is not None:
-            self.session.end_test()
+            spent = self.session.end_test()
+            stats = self.test_stats.setdefault(request.node.nodeid, {})
+            stats.update({("span" if k == "wall" else k): v for k, v in spent.items()})
         if self.session is not None and needed:
             try:
                 self.session.restore()
@@ -141,12 +150,19 @@ class SuitePlugin:
     @pytest.hookimpl(hookwrapper=True)
     def pytest_runtest_call(self, item: pytest.Item):
         """The test's body, with the grader's own work for it bounded in time and memory (``trusted_work``)."""
-        if self.session is None:
-            yield
-            return
-        limits = self.session.limits
-        with bounded(limits.test_seconds * CPU_WAIT_STRETCH, limits.trusted_bytes):
-            yield
+        start, cpu, wait = time.perf_counter(), time.thread_time(), _own_run_delay()
+        try:
+            if self.session is None:
+                yield
+            else:
+                limits = self.session.limits
+                with bounded(limits.test_seconds * CPU_WAIT_STRETCH, limits.trusted_bytes):
+                    yield
+        finally:
+            stats = self.test_stats.setdefault(item.nodeid, {})
+            stats.update(seconds=time.perf_counter() - start, grader_cpu=time.thread_time() - cpu)
+            if wait is not None and (now := _own_run_delay()) is not None:
+                stats["grader_wait"] = now - wait
 
     @pytest.fixture
     def reference(self) -> Namespace:
@@ -178,6 +194,15 @@ class SuitePlugin:
                 message="" if exc is None else feedback_message(exc),
                 hint=None if report.passed else kwargs.get("hint"),  # a hint is for a failed test only
                 seconds=report.duration, reason=Reason.PASSED if report.passed else test_reason(exc)))
+
+
+def _own_run_delay() -> float | None:
+    """Seconds this thread has spent runnable but waiting for a CPU (``/proc/thread-self/schedstat``), or None."""
+    try:
+        with open("/proc/thread-self/schedstat", "rb") as f:
+            return int(f.read().split()[1]) / 1e9
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def _title(item: pytest.Item) -> str:
@@ -225,9 +250,14 @@ class Grader:
     grading's inputs and outputs, masked in the sandbox wherever they lie inside the release.
     """
 
-    def __init__(self, assignment: str, limits: Limits | None = None, hide: Iterable[Path] = ()) -> None:
+    def __init__(self, assignment: str, limits: Limits | None = None, hide: Iterable[Path] = (),
+                 test_limits: dict[str, float] | None = None) -> None:
         course.check_assignment(assignment)
         self.assignment, self.limits = assignment, limits or course.limits(assignment)
+        self.test_limits = course.per_test_limits(assignment) if test_limits is None else dict(test_limits)
+        """Each hidden test's own limit (``limits.json``'s ``"tests"``, unless given: ``{}`` for none)."""
+        self.last_test_stats: dict[str, dict[str, float]] = {}
+        """What each test of the last :meth:`grade` cost (see :attr:`SuitePlugin.test_stats`)."""
         self.suite = course.suite_dir(assignment)
         helpers = [path.read_text() for path in (course.common_helpers(), self.suite / SANDBOX_HELPERS) if path.is_file()]
         self.helpers = "\n\n".join(helpers) if helpers else None
@@ -298,6 +328,7 @@ class Grader:
             return self._ungradable(result, f"could not read the notebook: {err}", start)
         except GraderError as err:
             return self.grader_error(result.submission, str(err), result.notes, start)
+        self.last_test_stats = {}
         stubs, match_notes = find_stubs(nb, self.expected)
         result.notes += notes + match_notes
         unrunnable = {name: match.problem for name, match in stubs.items() if match.problem}
@@ -314,7 +345,8 @@ class Grader:
             result.isolation = session.isolation
             reference = LocalTransport(self.reference_ns, self.helpers, self.reference_cache)
             plugin = SuitePlugin(Namespace(session, "student"), Namespace(reference, "reference"), session.status,
-                                 session, self.dependencies, input_key(self.version, stubs))
+                                 session, self.dependencies, input_key(self.version, stubs), self.test_limits)
+            self.last_test_stats = plugin.test_stats
             self._run_suite(plugin)
             if plugin.grader_faults:
                 raise GraderError("; ".join(plugin.grader_faults))

@@ -39,15 +39,20 @@ class FairDeadline:
 
     Time spent computing or sleeping counts; time spent runnable while other processes held every CPU does
     not. Where the kernel does not report the wait, it is a plain wall-clock deadline.
+
+    :meth:`left` reads the kernel's count only once the deadline is reached with the credit known so far: the
+    credit only grows, so until then reading it could say there is more time left, never that there is none.
+    A lent object's round trips (thousands in one call) then cost no read of ``/proc`` each.
     """
 
     def __init__(self, seconds: float, worker: WorkerProcess, max_credit: float) -> None:
         self.start, self.seconds, self.worker, self.max_credit = time.monotonic(), seconds, worker, max_credit
+        self.end = self.start + seconds
         self.wait_at_start = worker.cpu_wait()
         self._credit = 0.0
 
     def credit(self) -> float:
-        """Seconds of CPU wait forgiven so far."""
+        """Seconds of CPU wait forgiven so far (read from the kernel now)."""
         if self.wait_at_start is not None:
             now = self.worker.cpu_wait()
             if now is not None:
@@ -55,7 +60,10 @@ class FairDeadline:
         return self._credit
 
     def left(self) -> float:
-        return self.start + self.seconds + self.credit() - time.monotonic()
+        left = self.end + self._credit - time.monotonic()
+        if left > 0 or self.wait_at_start is None or self._credit >= self.max_credit:
+            return left
+        return self.end + self.credit() - time.monotonic()
 
 
 class StudentError(Exception):
@@ -188,7 +196,8 @@ class Handle:
 def _call(transport: Transport, target: str | int, args: tuple, kwargs: dict, timeout: float | None = None) -> Any:
     tree_args, blobs = encode(list(args), transport.reference_of)
     tree_kwargs, more = encode(kwargs, transport.reference_of)
-    tree_kwargs = _shift_blobs(tree_kwargs, len(blobs))
+    if blobs and more:  # renumber only when both trees hold blobs
+        tree_kwargs = _shift_blobs(tree_kwargs, len(blobs))
     return transport.request({"op": "call", "target": target, "args": tree_args, "kwargs": tree_kwargs},
                              blobs + more, timeout)
 
@@ -320,6 +329,10 @@ class LocalTransport(Transport):
 ReferenceCall = Callable[[str, Any, list[bytes]], tuple[dict, list[bytes]]]
 
 
+def _refuse_objects(id: int, type_name: str) -> Any:
+    raise ProtocolError("objects cannot be sent to a lent object")
+
+
 class Session(Transport):
     """One submission's sandbox: runs its cells, serves calls, restarts after failures.
 
@@ -346,9 +359,14 @@ class Session(Transport):
         self.restarts = 0
         self.standing_in: frozenset[str] = frozenset()
         self.test_deadline: float | None = None
+        self.test_seconds = self.limits.test_seconds  # this test's limit (its own, or test_seconds)
+        self.test_own_limit = False  # whether it is the test's own (then it bounds the suite's explicit timeouts too)
         self.test_credit = 0.0      # CPU wait forgiven in this test's calls so far
         self.credit_used = 0.0      # and in the whole submission's
         self.reference_calls = 0    # reference stand-in calls in this test
+        self.messages = 0           # messages the grader sent to and read from its workers (a cheap counter)
+        self.dead_worker_cpu_ns = 0  # CPU of the main threads of this session's workers that were killed
+        self._test_start: dict[str, float] | None = None
 
     # -------------------------------------------------------------- lifecycle
 
@@ -376,7 +394,7 @@ class Session(Transport):
     def _exec(self, cell: Cell) -> CellStatus:
         try:
             self._raw({"op": "exec", "label": cell.label, "source": cell.source, "module": cell.module}, [],
-                      self.limits.exec_seconds, explicit=True)
+                      self.limits.exec_seconds, explicit=True, cell=True)
             return CellStatus(True)
         except StudentError as err:
             if err.not_implemented:
@@ -407,55 +425,89 @@ class Session(Transport):
     def close(self) -> None:
         if self.worker is not None:
             self.worker.kill()
+            if self.worker.final_schedstat is not None:
+                self.dead_worker_cpu_ns += self.worker.final_schedstat[0]
             self.worker = None
+
+    def counters(self) -> dict[str, float]:
+        """Cheap running totals for accounts: messages, the workers' main-thread CPU and run delay (s)."""
+        stat = self.worker.schedstat() if self.worker is not None else None
+        return {"messages": self.messages, "worker_cpu": (self.dead_worker_cpu_ns + (stat[0] if stat else 0)) / 1e9,
+                "credit": self.credit_used, "time_used": self.time_used}
 
     # -------------------------------------------------------------- requests
 
-    def begin_test(self) -> None:
-        """A hidden test starts: from now its calls share one deadline, ``test_seconds`` away."""
-        self.test_deadline = time.monotonic() + self.limits.test_seconds
+    def begin_test(self, seconds: float | None = None) -> None:
+        """A hidden test starts: from now its calls share one deadline, ``seconds`` away (the test's own limit,
+        which then bounds every call of the test, those with a suite's own ``timeout`` too), else
+        ``test_seconds`` away (which a suite's own ``timeout`` overrides)."""
+        self.test_own_limit = seconds is not None
+        self.test_seconds = float(seconds) if seconds is not None else self.limits.test_seconds
+        self.test_deadline = time.monotonic() + self.test_seconds
         self.test_credit = 0.0
         self.reference_calls = 0
+        self._test_start = {"wall": time.monotonic(), **self.counters()}
 
-    def end_test(self) -> None:
+    def end_test(self) -> dict[str, float]:
+        """The test is over; what it cost: wall seconds from its start, messages, the worker's CPU, the CPU wait
+        forgiven."""
         self.test_deadline = None
+        start, self._test_start = self._test_start, None
+        if start is None:
+            return {}
+        now = self.counters()
+        return {"wall": time.monotonic() - start["wall"], "messages": now["messages"] - start["messages"],
+                "worker_cpu": now["worker_cpu"] - start["worker_cpu"], "credit": self.test_credit,
+                "limit": self.test_seconds}
 
-    def _deadline(self, timeout: float, explicit: bool) -> tuple[FairDeadline, str]:
+    TIMEOUT_CALL, TIMEOUT_TOTAL, TIMEOUT_TEST = range(3)
+
+    def _timeout_message(self, kind: int, seconds: float) -> str:
+        if kind == self.TIMEOUT_CALL:
+            return f"timed out after {seconds:.0f} s (an infinite loop, or far too slow)"
+        if kind == self.TIMEOUT_TOTAL:
+            return f"stopped: the submission used up its total time of {self.limits.submission_seconds:.0f} s"
+        limit = f"{self.test_seconds:.0f} s" if self.test_seconds >= 10 else f"{self.test_seconds:.1f} s"
+        return f"ran past this test's time limit of {limit} (an infinite loop, or far too slow)"
+
+    def _deadline(self, timeout: float, explicit: bool, cell: bool = False) -> tuple[FairDeadline, str]:
         """When a request must be answered, and what the student is told if it is not.
 
-        The earliest of: the call's own limit, the test's deadline (unless the suite gave this call a
-        ``timeout`` of its own), and what is left of the submission's total time. None of them counts the
-        worker's wait for a busy CPU, up to ``CPU_WAIT_STRETCH`` times each limit.
+        The earliest of: the call's own limit, the test's deadline (unless the request runs a cell, or the suite
+        gave this call a ``timeout`` of its own and the test has no limit of its own), and what is left of the
+        submission's total time. None of them counts the worker's wait for a busy CPU, up to
+        ``CPU_WAIT_STRETCH`` times each limit.
         """
         now = time.monotonic()
         total = self.limits.submission_seconds
         left = total - self.time_used
         if left <= 0:
-            raise SandboxTimeout(f"stopped: the submission used up its total time of {total:.0f} s")
+            raise SandboxTimeout(self._timeout_message(self.TIMEOUT_TOTAL, total))
         stretch = CPU_WAIT_STRETCH - 1
-        bounds = [(timeout, stretch * timeout, f"timed out after {timeout:.0f} s (an infinite loop, or far too slow)"),
-                  (left, stretch * total - self.credit_used,
-                   f"stopped: the submission used up its total time of {total:.0f} s")]
-        if self.test_deadline is not None and not explicit:
-            test_room = stretch * self.limits.test_seconds - self.test_credit
-            bounds.append((self.test_deadline + min(self.test_credit, stretch * self.limits.test_seconds) - now,
-                           max(0.0, test_room), f"ran past this test's time limit of {self.limits.test_seconds:.0f} s "
-                                                "(an infinite loop, or far too slow)"))
-        seconds, room, why = min(bounds, key=lambda bound: bound[0])
+        bounds = [(timeout, stretch * timeout, self.TIMEOUT_CALL), (left, stretch * total - self.credit_used,
+                                                                   self.TIMEOUT_TOTAL)]
+        if self.test_deadline is not None and not cell and (self.test_own_limit or not explicit):
+            test_room = stretch * self.test_seconds - self.test_credit
+            bounds.append((self.test_deadline + min(self.test_credit, stretch * self.test_seconds) - now,
+                           max(0.0, test_room), self.TIMEOUT_TEST))
+        seconds, room, kind = min(bounds, key=lambda bound: bound[0])
+        why = self._timeout_message(kind, timeout)
         if seconds <= 0:
             raise SandboxTimeout(why)
         return FairDeadline(seconds, self.worker, max(0.0, min(room, stretch * seconds))), why
 
-    def _raw(self, header: dict[str, Any], blobs: list[bytes], timeout: float, explicit: bool = False) -> Any:
+    def _raw(self, header: dict[str, Any], blobs: list[bytes], timeout: float, explicit: bool = False,
+             cell: bool = False) -> Any:
         """Send one request and read its answer, serving the worker's callbacks meanwhile, all by one deadline.
 
         Every write and read of the exchange, and the grader's own work for callbacks (a reference stand-in,
         a lent object's method), count against that deadline, so a worker that stops reading, answers
         slowly or keeps calling back is stopped when it passes.
         """
-        deadline, why = self._deadline(timeout, explicit)
+        deadline, why = self._deadline(timeout, explicit, cell)
         start = time.monotonic()
         try:
+            self.messages += 2
             self.worker.send(header, blobs, deadline)
             reply, reply_blobs = self.worker.receive(deadline)
             while "callback" in reply:  # the student's code called back into the grader: answer, read on
@@ -463,6 +515,7 @@ class Session(Transport):
                 del reply_blobs
                 if deadline.left() <= 0:
                     raise ChannelTimeout(why)
+                self.messages += 2
                 self.worker.send(answer, answer_blobs, deadline)
                 reply, reply_blobs = self.worker.receive(deadline)
             return _decode_reply(self, reply, reply_blobs)
@@ -512,11 +565,8 @@ class Session(Transport):
         raise ProtocolError("unknown callback")
 
     def _answer_lent(self, id: Any, method: str, tree: Any, blobs: list[bytes]) -> tuple[dict[str, Any], list[bytes]]:
-        def refuse(id: int, type_name: str) -> Any:
-            raise ProtocolError("objects cannot be sent to a lent object")
-
         try:
-            args, kwargs = decode(tree, blobs, refuse)
+            args, kwargs = decode(tree, blobs, _refuse_objects)
             out_tree, out_blobs = encode(self.call_lent(id, method, args, kwargs))
             return {"ok": True, "value": out_tree}, out_blobs
         except ProtocolError:

@@ -101,10 +101,16 @@ class WorkerProcess:
 
     def __init__(self, to_fd: int, from_fd: int, out_fd: int, max_message: int = MAX_MESSAGE_BYTES,
                  memory_bytes: int | None = None) -> None:
+        # Every write and read has a deadline: a worker that stops reading cannot hold the grader, and a read
+        # tries at once and polls only when nothing has come yet.
+        os.set_blocking(to_fd, False)
+        os.set_blocking(from_fd, False)
         self.to_fd, self.reader, self.out_fd = to_fd, FrameReader(from_fd, max_message), out_fd
         self.memory_bytes = memory_bytes
         self.guard: MemoryGuard | None = None
-        os.set_blocking(to_fd, False)  # every write has a deadline: a worker that stops reading cannot hold the grader
+        self._schedstat: int | None = None  # /proc/PID/schedstat, kept open: a pread is a tenth of an open and read
+        self.final_schedstat: tuple[int, int] | None = None
+        """The worker's (CPU ns, run-delay ns) as it was killed, for accounts that outlive it."""
         self.output = bytearray()
         self.pid = self.pgid = None
         self.isolation = "unknown"
@@ -135,16 +141,24 @@ class WorkerProcess:
             raise SandboxStartError(ready.get("error", "the sandbox failed to start"))
         return header
 
-    def cpu_wait(self) -> float | None:
-        """Seconds the worker has spent runnable but waiting for a CPU (the kernel's run delay of its main
-        thread, in ``/proc/PID/schedstat``); None where the kernel does not say."""
+    def schedstat(self) -> tuple[int, int] | None:
+        """(CPU ns, run-delay ns) of the worker's main thread, from ``/proc/PID/schedstat``; None where the kernel
+        does not say. The file is opened once and read again with ``pread``: a fair deadline may read it often."""
         if not isinstance(self.pid, int) or not self.alive:
             return None
         try:
-            with open(f"/proc/{self.pid}/schedstat") as f:
-                return int(f.read().split()[1]) / 1e9
-        except (OSError, ValueError, IndexError):
+            if self._schedstat is None:
+                self._schedstat = os.open(f"/proc/{self.pid}/schedstat", os.O_RDONLY | os.O_CLOEXEC)
+            run, wait, *_ = os.pread(self._schedstat, 128, 0).split()
+            return int(run), int(wait)
+        except (OSError, ValueError):
             return None
+
+    def cpu_wait(self) -> float | None:
+        """Seconds the worker has spent runnable but waiting for a CPU (the kernel's run delay of its main
+        thread, in ``/proc/PID/schedstat``); None where the kernel does not say."""
+        stat = self.schedstat()
+        return None if stat is None else stat[1] / 1e9
 
     def send(self, header: dict[str, Any], blobs: list[bytes], deadline: Any) -> None:
         """Write a message; raises ``ChannelTimeout`` if the worker has not taken it all by ``deadline``."""
@@ -177,8 +191,14 @@ class WorkerProcess:
             self.guard.stop()
         if not self.alive:
             return
+        self.final_schedstat = self.schedstat()
         self.alive = False
         self._signal_tree()
+        if self._schedstat is not None:
+            try:
+                os.close(self._schedstat)
+            except OSError:
+                pass
         for fd in (self.to_fd, self.reader.fd, self.out_fd):
             try:
                 os.close(fd)

@@ -11,9 +11,9 @@ import csv
 import json
 import os
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Sequence
 
-from autograder.core.batch import Shard, run_batch
+from autograder.core.batch import Batch, Shard, assignment_folder, run_batch, run_batches
 from autograder.core.results import GradeResult
 from autograder.core.store import atomic_write, save_result
 from autograder.outputs.feedback import FEEDBACK_NAME, feedback_markdown
@@ -63,13 +63,25 @@ def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str]
     os.replace(tmp, path)
 
 
-def grade_folder(assignment: str, folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True,
-                 shard: Shard = Shard()) -> list[GradeResult]:
+def grade_folder(assignment: str | Sequence[str], folder: Path, out_dir: Path, jobs: int = 2, progress: bool = True,
+                 shard: Shard = Shard()) -> list[GradeResult] | dict[str, list[GradeResult]]:
     """Grade every submission of ``folder`` (of ``shard``) not yet graded in ``out_dir``, write each one's files
-    and then the gradebook of them all (``gradebook.csv``, or ``gradebook-K-of-N.csv`` for a shard)."""
+    and then the gradebook of them all (``gradebook.csv``, or ``gradebook-K-of-N.csv`` for a shard).
+
+    ``assignment`` may be a list of several: they are graded in one pool of processes, which pays the
+    grader's start-up (its imports) once rather than once per assignment; each one's submissions are in
+    ``folder`` (nbgrader's layout) or ``folder/<id>/``, and its results and gradebook go to ``out_dir/<id>/``.
+    The results are then by assignment."""
     from autograder.core import course
 
-    results = run_batch(assignment, folder, out_dir, write=render_files, jobs=jobs,
-                        progress=progress_bar if progress else None, shard=shard)
-    write_gradebook(results, Path(out_dir) / shard.gradebook_name, course.stub_names(assignment))
-    return results
+    bar = progress_bar if progress else None
+    if isinstance(assignment, str):
+        results = run_batch(assignment, folder, out_dir, write=render_files, jobs=jobs, progress=bar, shard=shard)
+        write_gradebook(results, Path(out_dir) / shard.gradebook_name, course.stub_names(assignment))
+        return results
+    batches = [Batch(a, assignment_folder(folder, a), Path(out_dir) / a, shard) for a in assignment]
+    by_assignment = run_batches(batches, write=render_files, jobs=jobs, progress=bar)
+    for batch in batches:
+        write_gradebook(by_assignment[batch.assignment], batch.out_dir / shard.gradebook_name,
+                        course.stub_names(batch.assignment))
+    return by_assignment

@@ -3,8 +3,9 @@
 A message is one frame of UTF-8 JSON followed by the frames of its binary
 blobs; every frame is a 4-byte big-endian length and its bytes. Values are a
 small closed set: ``None``, ``bool``, ``int``, ``float``, ``str``, lists,
-tuples, string-keyed dicts, numpy arrays and scalars (as ``.npy`` with
-``allow_pickle=False``), torch tensors (as ``.npy``), *handles* to objects
+tuples, string-keyed dicts, numpy arrays (as ``.npy`` with ``allow_pickle=False``),
+numpy scalars (as a JSON number tagged with its dtype, or a 0-d ``.npy``), torch
+tensors (as ``.npy``), *handles* to objects
 that stay inside the worker, and *lent* objects: trusted objects that stay in
 the grader (an environment whose hidden parameters a stub must learn), whose
 named methods the worker calls back through the channel. Decoding builds only those types, so nothing a
@@ -16,7 +17,9 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
+import re
 import select
 import struct
 import time
@@ -80,15 +83,57 @@ class LentRef:
         self.id, self.type_name, self.methods, self.attrs = int(id), str(type_name)[:TYPE_NAME_CHARS], list(methods), dict(attrs)
 
 
+NPY_MAGIC = b"\x93NUMPY\x01\x00"
+"""The ``.npy`` format's version 1.0, which :func:`_npy_bytes` writes (the arrays it writes have short headers)."""
+NPY_ALIGN = 64
+"""numpy pads a header so that the data starts at a multiple of this (as ``np.save`` does)."""
+_NPY_HEADER = re.compile(rb"\{'descr': '([<>|=]?[biufc][0-9]{1,2})', 'fortran_order': (True|False), "
+                         rb"'shape': \((|[0-9]{1,19},|[0-9]{1,19}(?:, [0-9]{1,19})+)\), \} *\n")
+"""The header ``np.save`` writes for a numeric array, read without ``ast.literal_eval`` (which costs tens of
+microseconds a blob). A header of another form is read by numpy's own reader, as before."""
+_DTYPES: dict[bytes, np.dtype] = {}
+"""Dtypes by the ``descr`` text of a header that matched :data:`_NPY_HEADER` (a few dozen at most)."""
+NPNUM_TYPES = {np.dtype(name).type: name for name in ("bool", "int8", "int16", "int32", "int64", "uint8", "uint16",
+                                                      "uint32", "uint64", "float16", "float32", "float64")}
+"""numpy scalars that cross as JSON (``{"$npnum": [dtype name, value]}``) rather than as an ``.npy`` blob: each
+of their values is exactly a JSON bool, integer or double (a float32's value is one double exactly). Others
+(complex, ``longdouble``) cross as 0-d ``.npy`` blobs."""
+NPNUM_BY_NAME = {name: type_ for type_, name in NPNUM_TYPES.items()}
+NON_FINITE = ("nan", "inf", "-inf")
+
+
 def _npy_bytes(array: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    np.save(buffer, array, allow_pickle=False)
-    return buffer.getvalue()
+    """``array`` in the ``.npy`` format, byte for byte what ``np.save(..., allow_pickle=False)`` writes for it
+    (version 1.0), without going through a file object."""
+    dtype = array.dtype
+    if dtype.kind not in ALLOWED_DTYPE_KINDS or dtype.fields is not None or dtype.subdtype is not None:
+        buffer = io.BytesIO()
+        np.save(buffer, array, allow_pickle=False)
+        return buffer.getvalue()
+    fortran = bool(array.flags.f_contiguous and not array.flags.c_contiguous)
+    shape = tuple(int(n) for n in array.shape)
+    header = "{'descr': '%s', 'fortran_order': %s, 'shape': %r, }" % (dtype.str, fortran, shape)
+    pad = -(len(NPY_MAGIC) + 2 + len(header) + 1) % NPY_ALIGN
+    header = (header + " " * pad + "\n").encode("latin1")
+    return b"".join([NPY_MAGIC, struct.pack("<H", len(header)), header, array.tobytes("F" if fortran else "C")])
 
 
-def _npy_array(blob: bytes | bytearray) -> np.ndarray:
-    """The array in an ``.npy`` blob, without copying its data where the blob is writable (the grader reads
-    frames into ``bytearray``s): only the header is parsed apart, so a blob costs its own size in memory once."""
+def _npy_layout(blob: bytes | bytearray) -> tuple[tuple[int, ...], bool, np.dtype, int]:
+    """Shape, Fortran order, dtype and data offset of an ``.npy`` blob; raises :class:`ProtocolError`."""
+    if len(blob) >= 10 and blob[:8] == NPY_MAGIC:
+        end = 10 + (blob[8] | blob[9] << 8)
+        match = _NPY_HEADER.fullmatch(bytes(memoryview(blob)[10:end])) if end <= len(blob) else None
+        if match is not None:
+            dtype = _DTYPES.get(match[1])
+            if dtype is None:
+                try:
+                    dtype = np.dtype(match[1].decode())
+                except TypeError:
+                    raise ProtocolError("bad array data: unknown dtype") from None
+                if len(_DTYPES) < 512:
+                    _DTYPES[match[1]] = dtype
+            shape = tuple(int(n) for n in match[3].split(b",") if n.strip())
+            return shape, match[2] == b"True", dtype, end
     try:
         head = io.BytesIO(bytes(memoryview(blob)[:NPY_HEADER_BYTES]))
         major, _ = np.lib.format.read_magic(head)
@@ -98,16 +143,40 @@ def _npy_array(blob: bytes | bytearray) -> np.ndarray:
         shape, fortran, dtype = read_header(head, max_header_size=NPY_HEADER_BYTES)
     except Exception as err:  # noqa: BLE001 - any malformed header
         raise ProtocolError(f"bad array data: {str(err)[:QUOTED_CHARS]}") from None
+    return shape, fortran, dtype, head.tell()
+
+
+def _npy_array(blob: bytes | bytearray) -> np.ndarray:
+    """The array in an ``.npy`` blob, without copying its data where the blob is writable (the grader reads
+    frames into ``bytearray``s): only the header is parsed apart, so a blob costs its own size in memory once."""
+    shape, fortran, dtype, offset = _npy_layout(blob)
     if dtype.kind not in ALLOWED_DTYPE_KINDS or dtype.hasobject or dtype.fields is not None or dtype.subdtype:
         raise ProtocolError("arrays must be numeric numpy arrays")
     count = 1
     for n in shape:
         count *= int(n)
-    offset = head.tell()
     if len(blob) - offset != count * dtype.itemsize:
         raise ProtocolError("bad array data: its size does not match its shape")
-    array = np.frombuffer(blob, dtype=dtype, count=count, offset=offset).reshape(shape, order="F" if fortran else "C")
+    try:
+        array = np.frombuffer(blob, dtype=dtype, count=count, offset=offset).reshape(shape, order="F" if fortran else "C")
+    except ValueError as err:  # more dimensions than numpy allows, say
+        raise ProtocolError(f"bad array data: {str(err)[:QUOTED_CHARS]}") from None
     return array if array.flags.writeable else array.copy()
+
+
+def _npnum(name: Any, value: Any) -> np.generic:
+    """The numpy scalar of a ``$npnum`` value; raises :class:`ProtocolError` on anything but an exact one."""
+    type_ = NPNUM_BY_NAME.get(name) if type(name) is str else None
+    if type_ is None:
+        raise ProtocolError(f"unexpected value in message: a numpy scalar of type {str(name)[:QUOTED_CHARS]}")
+    kind = np.dtype(type_).kind
+    if not ((kind == "b" and type(value) is bool) or (kind in "iu" and type(value) is int)
+            or (kind == "f" and (type(value) is float or value in NON_FINITE))):
+        raise ProtocolError(f"unexpected value in message: {str(value)[:QUOTED_CHARS]} as a numpy {name}")
+    try:
+        return type_(value)
+    except (OverflowError, ValueError):
+        raise ProtocolError(f"a numpy {name} cannot hold {str(value)[:QUOTED_CHARS]}") from None
 
 
 def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, depth: int = 0) -> tuple[Any, list[bytes]]:
@@ -122,16 +191,23 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
         if type(v) is int:
             return v if abs(v) < 2**63 else {"$bigint": str(v)}
         if type(v) is float:
-            return {"$float": repr(v)} if not np.isfinite(v) else v
+            return v if math.isfinite(v) else {"$float": repr(v)}
         if type(v) is list:
             return [enc(x, d + 1) for x in v]
         if type(v) is tuple:
             return {"$tuple": [enc(x, d + 1) for x in v]}
-        if type(v) is dict and all(type(k) is str for k in v):
+        if type(v) is dict and (not v or all(type(k) is str for k in v)):
             return {"$dict": {k: enc(x, d + 1) for k, x in v.items()}}
         if type(v) is np.ndarray and v.dtype.kind in ALLOWED_DTYPE_KINDS:
             blobs.append(_npy_bytes(v))
             return {"$ndarray": len(blobs) - 1}
+        if type(v) in NPNUM_TYPES:
+            if type(v) is np.bool_:
+                return {"$npnum": ["bool", bool(v)]}
+            if v.dtype.kind == "f":
+                x = float(v)
+                return {"$npnum": [NPNUM_TYPES[type(v)], x if math.isfinite(x) else repr(x)]}
+            return {"$npnum": [NPNUM_TYPES[type(v)], int(v)]}
         if isinstance(v, np.generic) and type(v).__module__ == "numpy" and v.dtype.kind in ALLOWED_DTYPE_KINDS:
             blobs.append(_npy_bytes(np.asarray(v)))
             return {"$npscalar": len(blobs) - 1}
@@ -192,6 +268,8 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
                 raise ProtocolError("bad integer") from None
         if tag == "$ndarray" and not rest:
             return _npy_array(blob(body))
+        if tag == "$npnum" and not rest and type(body) is list and len(body) == 2:
+            return _npnum(*body)
         if tag == "$npscalar" and not rest:
             array = _npy_array(blob(body))
             if array.ndim != 0:
@@ -227,10 +305,12 @@ def seconds_left(deadline: Any) -> float | None:
     return deadline.left()
 
 
-def _wait(fd: int, event: int, deadline: Any) -> None:
-    """Block until ``fd`` is ready for ``event`` (``select.POLLIN`` or ``POLLOUT``), or raise at ``deadline``."""
-    poller = select.poll()
-    poller.register(fd, event)
+def _wait(fd: int, event: int, deadline: Any, poller: Any = None) -> None:
+    """Block until ``fd`` is ready for ``event`` (``select.POLLIN`` or ``POLLOUT``), or raise at ``deadline``.
+    ``poller``: a ``select.poll`` object with ``fd`` registered for ``event`` already."""
+    if poller is None:
+        poller = select.poll()
+        poller.register(fd, event)
     while True:
         if deadline is None:
             timeout_ms = None
@@ -252,9 +332,25 @@ def _write_all(fd: int, data: bytes, deadline: float | None) -> None:
         except BlockingIOError:
             _wait(fd, select.POLLOUT, deadline)
             continue
+        if n == len(view):  # the usual case, a small message: one write, no deadline to look at
+            return
         view = view[n:]
-        if view and deadline is not None and seconds_left(deadline) < 0:
+        if deadline is not None and seconds_left(deadline) < 0:
             raise ChannelTimeout("the other side stopped reading")
+
+
+def _not_json(value: Any) -> Any:
+    raise TypeError(f"a {type(value).__name__} is not JSON")
+
+
+_JSON = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+_C_ENCODER = getattr(json.encoder, "c_make_encoder", None)
+_encode_header: Callable[[Any], str] = (
+    _JSON.encode if _C_ENCODER is None else
+    lambda value, encoder=_C_ENCODER(None, _not_json, json.encoder.encode_basestring_ascii, None, ":", ",", False, False,
+                                     False): "".join(encoder(value, 0)))
+"""A header as JSON text, ASCII, no NaN, by one encoder made once (``json.dumps`` makes one per call). Headers are
+trees that :func:`encode` built (never circular), so the encoder keeps no record of the containers it is in."""
 
 
 def send_message(fd: int, header: dict[str, Any], blobs: list[bytes] = (), deadline: float | None = None) -> None:
@@ -263,47 +359,83 @@ def send_message(fd: int, header: dict[str, Any], blobs: list[bytes] = (), deadl
     ``deadline`` (a ``time.monotonic()`` value) bounds the write: a peer that stops reading cannot block the
     writer for longer. The grader writes with one, on a non-blocking descriptor; a worker writes without.
     """
-    head = json.dumps(dict(header, nblobs=len(blobs)), allow_nan=False).encode()
+    head = _encode_header(dict(header, nblobs=len(blobs))).encode()
     _write_all(fd, b"".join([struct.pack(">I", len(head)), head, *(struct.pack(">I", len(b)) + b for b in blobs)]),
                deadline)
+
+
+READ_AHEAD = 64 * 1024
+"""Bytes a :class:`FrameReader` may read past the end of the frame it is reading, in the same system call, and
+keep for the next frames: a small message then costs one read, not one per frame (and, with a deadline, one
+``poll`` rather than two)."""
 
 
 class FrameReader:
     """Reads messages from ``fd``, each within a deadline and a size cap.
 
     Frames are read straight into buffers of their announced size, allocated only after the size is known
-    to fit in what is left of the message's cap, and never past a frame's end: what a peer sends costs at most
-    ``max_message`` bytes, and a JSON header is parsed only when its count of values is within bounds.
+    to fit in what is left of the message's cap; the bytes a read brings past a frame's end (at most
+    :data:`READ_AHEAD`, in a buffer allocated once) are kept for the frames after it. So what a peer sends
+    costs at most ``max_message`` bytes plus that buffer, and a JSON header is parsed only when its count of
+    values is within bounds.
+
+    A read with a deadline never blocks past it: it waits in ``poll`` (which looks at the deadline first) before
+    every read, so a peer that keeps the pipe full cannot hold the reader past it either; the grader's end of a
+    worker's channel is non-blocking besides. A read without a deadline (the worker's) just blocks in the read.
     """
 
     def __init__(self, fd: int, max_message: int = MAX_MESSAGE_BYTES) -> None:
         self.fd, self.max_message = fd, max_message
+        self._spare = bytearray(READ_AHEAD)
+        self._pending = memoryview(b"")
+        self._poller = select.poll()
+        self._poller.register(fd, select.POLLIN)
 
-    def _read_exact(self, n: int, deadline: float | None) -> bytearray:
-        out = bytearray(n)
-        view, got = memoryview(out), 0
-        while got < n:
-            _wait(self.fd, select.POLLIN, deadline)
+    def _read_into(self, view: memoryview, deadline: Any) -> int:
+        """Read at least one byte into ``view`` (and what follows at once into the spare buffer): the count."""
+        while True:
+            if deadline is not None:
+                _wait(self.fd, select.POLLIN, deadline, self._poller)
             try:
-                k = os.readv(self.fd, [view[got:]])
+                k = os.readv(self.fd, [view, self._spare])
             except BlockingIOError:
+                _wait(self.fd, select.POLLIN, deadline, self._poller)
                 continue
             if not k:
                 raise ChannelClosed("the other side closed the channel")
+            return k
+
+    def _read_exact(self, n: int, deadline: Any) -> bytearray:
+        pending = self._pending
+        if len(pending) >= n:  # read ahead already: the next frames of a small message
+            self._pending = pending[n:]
+            return bytearray(pending[:n])
+        out = bytearray(n)
+        view = memoryview(out)
+        got = len(pending)
+        if got:
+            view[:got] = self._pending[:got]
+            self._pending = self._pending[got:]
+        while got < n:
+            k = self._read_into(view[got:], deadline)
+            if k > n - got:  # the read went on past this frame: keep the rest for the next ones
+                self._pending = memoryview(bytes(self._spare[:k - (n - got)]))
+                k = n - got
             got += k
         return out
 
-    def _frame(self, deadline: float | None, room: int, what: str) -> bytearray:
+    def _frame(self, deadline: Any, room: int, what: str) -> bytearray:
         (size,) = struct.unpack(">I", self._read_exact(4, deadline))
         if size > room:
             raise ProtocolError(f"{what} of {size} bytes is over the limit")
         return self._read_exact(size, deadline)
 
-    def read_message(self, timeout: float | None = None, deadline: float | None = None
+    def read_message(self, timeout: float | None = None, deadline: Any = None
                      ) -> tuple[dict[str, Any], list[bytearray]]:
         """One message's header and blobs; raises on timeout, closed channel, malformed or oversized data.
 
-        ``deadline`` (``time.monotonic()``) or ``timeout`` (seconds from now) bounds the whole message.
+        ``deadline`` (``time.monotonic()``, or an object with ``left()``) or ``timeout`` (seconds from now)
+        bounds the whole message.
         """
         if deadline is None and timeout is not None:
             deadline = time.monotonic() + timeout

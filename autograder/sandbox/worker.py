@@ -72,16 +72,19 @@ class Lent:
     __slots__ = ("_lent",)
 
     def __init__(self, ref: LentRef, call: Callable[[int, str, tuple, dict], Any]) -> None:
-        object.__setattr__(self, "_lent", (ref, call))
+        object.__setattr__(self, "_lent", (ref, call, {}))
 
     def __getattr__(self, name: str) -> Any:
-        ref, call = object.__getattribute__(self, "_lent")
+        ref, call, methods = object.__getattribute__(self, "_lent")
         if name in ref.attrs:
             return ref.attrs[name]
+        if name in methods:  # made once per method: a loop of ``env.duel(...)`` builds no function per call
+            return methods[name]
         if name in ref.methods:
             def method(*args: Any, **kwargs: Any) -> Any:
                 return call(ref.id, name, args, kwargs)
             method.__name__ = name
+            methods[name] = method
             return method
         raise AttributeError(f"{ref.type_name} has no attribute {name!r} that the grader lends")
 
