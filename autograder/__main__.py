@@ -8,8 +8,9 @@
   merge ID SHARD_DIR ... --out DIR   join the shards of a batch into one gradebook (refuses a mismatch)
   prairielearn ID [--root /grade]    grade as PrairieLearn's external grader (results/results.json);
         [--question-files DIR]       or write the question's files for a PrairieLearn course
+        [--timeout SECONDS]
   demo                               grade the sample submissions of every assignment (the README's main job)
-  gradescope ID [--out ZIP]          build the Gradescope autograder bundle
+  gradescope ID [--out ZIP] [--visibility V]   build the Gradescope autograder bundle
   run NOTEBOOK [-p NAME=VALUE ...]   execute a notebook with parameters under a time budget
   assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
   student-release OUT                build the student-only tree
@@ -155,7 +156,7 @@ def _cmd_prairielearn(args: argparse.Namespace) -> int:
     from autograder.outputs.prairielearn import question_files, run
 
     if args.question_files is not None:
-        for path in question_files(args.assignment, args.question_files, image=args.image):
+        for path in question_files(args.assignment, args.question_files, image=args.image, timeout=args.timeout):
             print(f"wrote {path}")
         return 0
     return run(args.assignment, args.root)
@@ -176,12 +177,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     return run_demo(args.out, jobs=args.jobs)
 
-
-def _cmd_gradescope(args: argparse.Namespace) -> int:
-    from autograder.outputs.gradescope import build_bundle
-
-    print(f"wrote {build_bundle(args.assignment, args.out)}")
-    return 0
 
 
 def _cmd_assignments(args: argparse.Namespace) -> int:
@@ -253,15 +248,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--question-files", type=Path, default=None, metavar="COURSE_DIR",
                    help="instead of grading, write the question's info.json, question.html and run.sh here")
     p.add_argument("--image", default="rlcourse-grader", help="the grading image named in info.json")
+    p.add_argument("--timeout", type=int, default=None, metavar="SECONDS",
+                   help="the question's grading timeout (default: the submission's limit plus 60 s; at most 600)")
     p.set_defaults(fn=_cmd_prairielearn)
     p = sub.add_parser("demo", help="grade every assignment's sample submissions")
     p.add_argument("--out", type=Path, default=Path("build/demo"))
     p.add_argument("--jobs", type=int, default=2)
     p.set_defaults(fn=_cmd_demo)
-    p = sub.add_parser("gradescope", help="build the Gradescope autograder zip")
-    p.add_argument("assignment")
-    p.add_argument("--out", type=Path, default=None)
-    p.set_defaults(fn=_cmd_gradescope)
+    from autograder.outputs import gradescope
+
+    gradescope.add_command(sub)  # gradescope ID [--out ZIP] [--visibility V]
     p = sub.add_parser("run", help="execute a notebook with parameters")
     p.add_argument("notebook", type=Path)
     p.add_argument("-p", "--parameter", action="append", default=[], metavar="NAME=VALUE")

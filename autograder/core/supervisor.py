@@ -43,7 +43,8 @@ class Zygote:
     def __init__(self, preload: list[str]) -> None:
         parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "autograder.sandbox.zygote", str(child.fileno()), json.dumps(preload)],
+            [sys.executable, "-m", "autograder.sandbox.zygote", str(child.fileno()), json.dumps(preload),
+             str(os.getpid())],
             pass_fds=[child.fileno()], stdin=subprocess.DEVNULL, cwd="/", env=safe_environment(dict(os.environ)))
         child.close()
         self.sock = parent

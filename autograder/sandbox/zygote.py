@@ -116,10 +116,12 @@ def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> N
     os._exit(0)
 
 
-def main(sock: socket.socket, preload: list[str]) -> None:
+def main(sock: socket.socket, preload: list[str], grader: int) -> None:
     """[zygote] Pre-import ``preload``, then fork a launcher per request on ``sock``; never returns."""
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # children are reaped automatically
     isolation.libc.prctl(isolation.PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # die with the grader
+    if os.getppid() != grader:  # the grader died before the line above took effect: nobody will ask for workers
+        os._exit(0)
     os.environ.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg")
     for module in [*preload, *(m for p in preload for m in IMPORT_TIME_PROBES.get(p.split(".")[0], ()))]:
         try:
@@ -145,5 +147,5 @@ def main(sock: socket.socket, preload: list[str]) -> None:
             os.close(fd)
 
 
-if __name__ == "__main__":  # python -m autograder.sandbox.zygote FD PRELOAD_JSON
-    main(socket.socket(fileno=int(sys.argv[1])), json.loads(sys.argv[2]))
+if __name__ == "__main__":  # python -m autograder.sandbox.zygote FD PRELOAD_JSON GRADER_PID
+    main(socket.socket(fileno=int(sys.argv[1])), json.loads(sys.argv[2]), int(sys.argv[3]))
