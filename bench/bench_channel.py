@@ -30,6 +30,10 @@ goes), so the split of the grader's share can be read off.
 The settings are fixed here, before any run: ``N`` round trips per repeat, ``REPEATS`` repeats, the
 two argument kinds, the two plain-call values, ``PIECE_ITERATIONS`` iterations per piece.
 ``--record`` merges this run under ``--label`` into ``bench/results/channel.json`` with its ``meta``.
+
+Before and after a change, on a loaded machine, alternate the two (the earlier commit's grader from
+``git archive COMMIT autograder rlcourse ... | tar -x -C DIR``, this script copied into ``DIR/bench``, run with
+``PYTHONPATH=DIR BENCH_COMMIT=COMMIT`` and ``--out`` this file) so that each pair meets about the same load.
 """
 from __future__ import annotations
 
@@ -98,9 +102,13 @@ def schedstat(pid: int) -> tuple[int, int]:
 
 
 def meta() -> dict:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO).stdout.strip()
-    dirty = subprocess.run(["git", "status", "--porcelain", "--", "autograder/sandbox", "autograder/core"],
-                           capture_output=True, text=True, cwd=REPO).stdout.strip()
+    if os.environ.get("BENCH_COMMIT"):  # a copy of an earlier commit's grader (git archive), run for a paired comparison
+        commit, dirty = os.environ["BENCH_COMMIT"], ""
+    else:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=REPO).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "autograder/sandbox", "autograder/core"],
+                               capture_output=True, text=True, cwd=REPO).stdout.strip()
     return {"commit": commit, "grader_files_changed_since_commit": bool(dirty),
             "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()), "machine": "2-core CPU",
             "python": sys.version.split()[0]}
@@ -333,13 +341,52 @@ def pieces(iterations: int) -> dict:
     return out
 
 
+def summarise(path: Path) -> dict:
+    """The paired runs (``before-i`` / ``after-i``) of ``path`` side by side: per case, the median CPU overhead
+    per round trip (both sides) of each run, with the load average (1 min) it started at."""
+    data = json.loads(path.read_text())
+    runs = data.get("runs", {})
+    pairs = sorted({label.split("-", 1)[1] for label in runs if label.startswith("before-")}
+                   & {label.split("-", 1)[1] for label in runs if label.startswith("after-")})
+    cases = [c for c in runs[f"before-{pairs[0]}"]["end_to_end_us"] if "overhead_cpu_both_sides" in
+             runs[f"before-{pairs[0]}"]["end_to_end_us"][c]] if pairs else []
+    out = {}
+    for case in cases:
+        row = {}
+        for side in ("before", "after"):
+            values = [runs[f"{side}-{p}"]["end_to_end_us"][case]["overhead_cpu_both_sides"]["median"] for p in pairs]
+            row[f"{side}_us"] = {"per_pair": [round(v, 1) for v in values], "median": round(statistics.median(values), 1)}
+        row["ratio_after_to_before"] = round(row["after_us"]["median"] / row["before_us"]["median"], 3)
+        out[case] = row
+    loads = {f"{side}-{p}": round(runs[f"{side}-{p}"]["meta"]["load"][0], 2) for p in pairs for side in ("before", "after")}
+    floor = [runs[f"after-{p}"]["pipe_floor_us"]["overhead_cpu_both_sides"]["median"] for p in pairs
+             if "pipe_floor_us" in runs[f"after-{p}"]]
+    return {"pairs": len(pairs), "cases": out, "load_at_start": loads,
+            "pipe_floor_us_median": round(statistics.median(floor), 2) if floor else None,
+            "target_us": TARGET_US,
+            "lent_round_trip_within_target": {case: row["after_us"]["median"] <= TARGET_US for case, row in out.items()
+                                              if case.startswith("lent_round_trip")}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--label", required=True, help="where this run goes in the results file (before, after...)")
+    parser.add_argument("--label", help="where this run goes in the results file (before-1, after-1, ...)")
+    parser.add_argument("--summarise", action="store_true",
+                        help="only write the paired summary of the runs in --out (before-i against after-i)")
     parser.add_argument("--n", type=int, default=N)
     parser.add_argument("--repeats", type=int, default=REPEATS)
     parser.add_argument("--record", action="store_true")
+    parser.add_argument("--out", type=Path, default=REPO / "bench" / "results" / "channel.json",
+                        help="the results file --record merges into")
     args = parser.parse_args()
+    if args.summarise:
+        data = json.loads(args.out.read_text())
+        data["paired_summary"] = summarise(args.out)
+        args.out.write_text(json.dumps(data, indent=1) + "\n")
+        print(json.dumps(data["paired_summary"], indent=1))
+        return
+    if not args.label:
+        parser.error("--label is needed to run")
     run_meta = meta()
     result = {"meta": run_meta, "settings": {"n": args.n, "repeats": args.repeats,
                                               "piece_iterations": PIECE_ITERATIONS},
@@ -361,7 +408,7 @@ def main() -> None:
         print(f"  {name}: {us:.2f} µs")
     print(f"load {run_meta['load']} -> {run_meta['load_at_end']}")
     if args.record:
-        path = REPO / "bench" / "results" / "channel.json"
+        path = args.out
         data = json.loads(path.read_text()) if path.exists() else {}
         data.setdefault("description", "Per-message overhead of the grader-sandbox channel (bench/bench_channel.py): "
                                        "CPU microseconds per round trip on both sides, worker's own loop subtracted; "
