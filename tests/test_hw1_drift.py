@@ -95,7 +95,7 @@ def test_results_file_is_consistent():
         n = len(setting["seeds"])
         assert len(setting["bc"]) == len(setting["dagger"]) == len(setting["labels"]) == n
         again = drift.summarise(_runs(setting["bc"], setting["dagger"]))
-        assert np.isclose(again["bc_mean"], setting["bc_mean"]) and np.isclose(again["dagger_mean"], setting["dagger_mean"])
+        assert np.isclose(again["bc_mean"], setting["bc_mean"], atol=1e-3) and np.isclose(again["dagger_mean"], setting["dagger_mean"], atol=1e-3)
         assert setting["target_met"] == (again["target_met"] and n == 5), setting["name"]
         for curve in setting["dagger_curve"] + setting["bc_curve"]:
             labels = [x for x, _ in curve]
