@@ -3,6 +3,7 @@
 Prints the Markdown tables that the README shows:
 
     python bench/bench_hw1_imitation.py                  # everything (about 15 minutes on 2 shared cores)
+    python bench/bench_hw1_imitation.py --calm           # the calm Hopper table only, recorded under "calm"
     python bench/bench_hw1_imitation.py --drift --part 0/2  # the drift protocol below (resumable; run parts 0/2 and 1/2 side by side)
     python bench/bench_hw1_imitation.py --expert HalfCheetah-v5=experts/HalfCheetah-v5/sac/ckpt_0125000.pt
 
@@ -114,8 +115,11 @@ class Bench:
                   f"{d.n_episodes} × {d.lengths.mean():.0f} steps ({d.returns.mean():.0f} ± {d.returns.std():.0f}) |")
         print()
         rows = []
+        self.record = {}
         for env in self.experts:
             bc1 = {}
+            self.record[env] = {"expert_return": expert_return[env], "eval_episodes": self.episodes,
+                                "eval_seed": EVAL_SEED, "seeds": list(SEEDS), "bc": {}}
             for k in N_DEMOS:
                 t = time.time()
                 runs = []
@@ -126,6 +130,8 @@ class Bench:
                     runs.append(self.returns(policy, env).mean())
                 rows.append((env, f"BC, {k} demo{'s' * (k > 1)}", int(self.demos[env].lengths[:k].sum()),
                              frac(runs, expert_return[env]), time.time() - t))
+                self.record[env]["bc"][str(k)] = {"labels": int(self.demos[env].lengths[:k].sum()),
+                                                  "fraction": [float(r / expert_return[env]) for r in runs]}
             t = time.time()
             finals, curves, labels = [], [], []
             for seed in SEEDS:
@@ -138,6 +144,10 @@ class Bench:
                 curves.append(np.r_[hist["returns"][1:], finals[-1]] / expert_return[env])  # after iteration 1..N
                 labels.append(hist["dataset_sizes"][-1])
             curve = np.mean(curves, axis=0)
+            self.record[env]["dagger"] = {"iterations": DAGGER_ITERS, "episodes_per_iter": DAGGER_EPISODES,
+                                          "labels": [int(x) for x in labels],
+                                          "fraction": [float(f / expert_return[env]) for f in finals],
+                                          "curve_per_seed": [[float(x) for x in c] for c in curves]}
             reached = np.flatnonzero(curve >= 0.9)
             rows.append((env, f"DAgger, 1 demo + {DAGGER_ITERS} iterations", int(np.mean(labels)),
                          frac(finals, expert_return[env]), time.time() - t))
@@ -305,11 +315,20 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes per learner (the notebook's 5)")
     parser.add_argument("--expert", nargs="*", default=[], metavar="ENV=FILE",
                         help="use another expert file (relative to datasets/) for an environment")
+    parser.add_argument("--calm", action="store_true", help="only the calm MuJoCo table, recorded under \"calm\"")
     parser.add_argument("--drift", action="store_true", help="run the drift protocol (resumable) and record it")
     parser.add_argument("--part", default="0/1", help="with --drift: run only part I of N of the runs (I/N)")
     parser.add_argument("--summary", action="store_true", help="with --drift: only write the results of finished runs")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.calm:  # Hopper only: the table lecture 1 and the notebook's section 6 refer to
+        bench = Bench({"Hopper-v5": experts["Hopper-v5"]}, args.episodes)
+        bench.mujoco()
+        results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+        results["calm"] = {**bench.record, "bc_steps": BC_STEPS, "hidden": list(HIDDEN), "meta": meta()}
+        RESULTS.write_text(json.dumps(results, indent=1) + "\n")
+        print(f"wrote {RESULTS.relative_to(REPO)}")
+        return
     if args.drift:
         if not args.summary:
             drift_runs(tuple(int(x) for x in args.part.split("/")))
