@@ -154,10 +154,12 @@ def test_validation_pairs_are_held_out(student, trusted_copy, rng):
                           val_fraction=0.5)
     train, val = _history(hist, 150)
     losses = np.sort(_pair_nll(trusted_copy(policy, 3, 2, (64, 64)), obs, actions))
-    fitted, unseen = losses[:20].mean(), losses[20:].mean()   # the reference: about -1.2 and above 50
+    fitted, unseen = losses[:20].mean(), losses[20:].mean()
+    # The reference over 30 draws of these inputs: unseen - fitted >= 21.6, val[-1] within 0.1% of unseen, train[-1]
+    # within 0.84 x (0.3 + 0.2 |fitted|) of fitted; not holding out: a gap of about 0.2
     assert unseen > fitted + 2.0, ("the trained policy fits all 40 pairs about equally well: the 20 held-out pairs "
                                    "were trained on (split once before the first epoch; shuffle only the training part)")
     assert np.isclose(val[-1], unseen, rtol=1e-2, atol=1e-2), \
         "history['val'][-1] is not the policy's mean loss on the pairs it never fit (the held-out pairs after the last epoch)"
-    assert np.isclose(train[-1], fitted, rtol=0.2, atol=0.3), \
+    assert np.isclose(train[-1], fitted, rtol=0.3, atol=0.6), \
         "history['train'][-1] is far from the policy's mean loss on its training pairs"
