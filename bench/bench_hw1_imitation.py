@@ -321,6 +321,13 @@ def main() -> None:
     parser.add_argument("--summary", action="store_true", help="with --drift: only write the results of finished runs")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.drift:
+        if not args.summary:
+            drift_runs(tuple(int(x) for x in args.part.split("/")))
+        write_drift()
+        return
+    experts = {env: f"experts/{env}/expert.pt" for env in ENVS}
+    experts.update(dict(item.split("=", 1) for item in args.expert))
     if args.calm:  # Hopper only: the table lecture 1 and the notebook's section 6 refer to
         bench = Bench({"Hopper-v5": experts["Hopper-v5"]}, args.episodes)
         bench.mujoco()
@@ -329,13 +336,6 @@ def main() -> None:
         RESULTS.write_text(json.dumps(results, indent=1) + "\n")
         print(f"wrote {RESULTS.relative_to(REPO)}")
         return
-    if args.drift:
-        if not args.summary:
-            drift_runs(tuple(int(x) for x in args.part.split("/")))
-        write_drift()
-        return
-    experts = {env: f"experts/{env}/expert.pt" for env in ENVS}
-    experts.update(dict(item.split("=", 1) for item in args.expert))
     if not args.skip_learners:
         bench = Bench(experts, args.episodes)
         bench.mujoco()
