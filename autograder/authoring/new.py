@@ -125,11 +125,7 @@ def test_matches_the_reference(student, reference, rng):
 ''',
 }
 
-TRIVIAL = '''"""Trivial answers to {assignment}'s stubs, each written to look plausible while doing none of the work.
-
-The project's tests (tests/test_adversarial_suites.py) grade a notebook whose every stub is replaced by
-its answer here and require that it earns nothing. Not a test module: the grader collects test_*.py only.
-"""
+TRIVIAL = '''"""Trivial answers to {assignment}'s stubs: plausible, doing none of the work; each must earn nothing (CONTRIBUTING.md)."""
 ANSWERS = {{
 "returns_to_go": \'\'\'
 def returns_to_go(rewards, gamma):

@@ -21,7 +21,6 @@ which imports :func:`fit_reward_model` and :func:`train_dpo` from here for its o
 from __future__ import annotations
 
 import argparse
-import copy
 import time
 from dataclasses import asdict
 
@@ -34,32 +33,20 @@ from rlcourse import group_rl as G
 from rlcourse import reviews as R
 from rlcourse.checkpoint import save_model
 from rlcourse.lm import ScalarHeadLM, TinyLM, load_sft, save_lm
+from rlcourse import lm_training
 from rlcourse.lm_training import pairwise_train
 
 
 def fit_reward_model(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, steps: int, seed: int,
                      batch: int = 64, lr: float = 3e-4) -> ScalarHeadLM:
-    """A scalar-head copy of ``sft`` fitted to pairs (row ``i`` of ``chosen`` beats row ``i`` of ``rejected``).
+    """A scalar-head copy of ``sft`` fitted to pairs (row ``i`` of ``chosen`` beats row ``i`` of ``rejected``):
+    ``rlcourse.lm_training.fit_reward_model`` with the Bradley-Terry loss written here (the script may not use
+    a student's stub). In eval mode, ``rm.shift`` and ``rm.scale`` standardise ``rlcourse.group_rl.proxy_score``."""
+    return lm_training.fit_reward_model(sft, chosen, rejected, _bradley_terry_loss, steps, seed, batch=batch, lr=lr)
 
-    Bradley-Terry negative log-likelihood, AdamW, ``steps`` batches of ``batch`` pairs. The result is in eval
-    mode, with ``rm.shift`` and ``rm.scale`` the mean and standard deviation of its raw scores on all the
-    pairs' sequences, so that ``rlcourse.group_rl.proxy_score`` is standardised.
-    """
-    torch.manual_seed(seed)
-    gen = torch.Generator().manual_seed(seed)
-    rm = ScalarHeadLM(copy.deepcopy(sft)).train()
-    opt = torch.optim.AdamW(rm.parameters(), lr=lr, weight_decay=0.01)
-    for _ in range(steps):
-        idx = torch.randint(len(chosen), (batch,), generator=gen)
-        loss = -F.logsigmoid(rm.score(chosen[idx]) - rm.score(rejected[idx])).mean()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-    rm.eval()
-    with torch.no_grad():
-        raw = torch.cat([rm.score(x) for x in torch.cat([chosen, rejected]).split(512)])
-    rm.shift, rm.scale = float(raw.mean()), float(raw.std())
-    return rm
+
+def _bradley_terry_loss(chosen_scores: torch.Tensor, rejected_scores: torch.Tensor) -> torch.Tensor:
+    return -F.logsigmoid(chosen_scores - rejected_scores).mean()
 
 
 def train_dpo(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, prompt_len: int, beta: float, steps: int,

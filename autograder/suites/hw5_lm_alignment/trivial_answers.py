@@ -1,10 +1,4 @@
-"""Trivial answers to hw5_lm_alignment's stubs, each written to look plausible while doing none of the work.
-
-The project's tests (tests/test_adversarial_suites.py) grade a notebook whose every stub is replaced by
-its answer here and require that it earns nothing: each hidden test must pair its invariance with a value
-such an answer gets wrong. Every stub of the assignment has one (``python -m autograder new`` writes them
-for a new assignment). Not a test module: the grader collects ``test_*.py`` only.
-"""
+"""Trivial answers to hw5_lm_alignment's stubs: plausible, doing none of the work; each must earn nothing (CONTRIBUTING.md)."""
 ANSWERS = {
 "token_log_probs": '''
 def token_log_probs(logits, tokens, mask):
