@@ -20,7 +20,8 @@ once, as for a batch's first submission), its wall time, the worker's CPU (its m
 grader's CPU (its main thread) and its channel messages; and graded against the reference alone (the
 solution's own namespace as the student, in this process, no sandbox, a fresh reference cache, the same
 hidden inputs), its wall and CPU time: the floor a grading is measured against. It grades the looping
-sample once too (what a stub that never returns costs). CPU times are the figures to read on a loaded
+sample once too (what a stub that never returns costs), with its per-test limits and without them (every
+test at ``test_seconds``, as before they existed), in the same grader. CPU times are the figures to read on a loaded
 machine; every assignment's record carries the load it was measured at.
 
     python bench/bench_class_throughput.py --n 4 --ids hw0_setup hw3_preferences --per-test --record
@@ -144,6 +145,11 @@ def per_test(assignment: str) -> dict:
         looping_wall = time.perf_counter() - wall
         timeouts = {node: round(s["span"], 2) for node, s in grader.last_test_stats.items()
                     if "span" in s and s["span"] >= 0.8 * s.get("limit", 1e9)}
+        own_limits, grader.test_limits = grader.test_limits, {}  # the same, with test_seconds for every test
+        wall = time.perf_counter()
+        grader.grade(samples / "infinite_loop.ipynb")
+        looping_without_wall = time.perf_counter() - wall
+        grader.test_limits = own_limits
         stubs = {name: m for name, m in find_stubs(read_code_cells(samples / "complete.ipynb")[0], grader.expected)[0].items()
                  if not m.problem}
         alone = build_reference(assignment)
@@ -158,11 +164,11 @@ def per_test(assignment: str) -> dict:
     tests = {}
     for node in sorted(set(complete) | set(plugin.test_stats)):
         c, r = complete.get(node, {}), plugin.test_stats.get(node, {})
-        tests[node] = {"complete": _rounded({"wall": c.get("span", c.get("seconds")), "worker_cpu": c.get("worker_cpu"),
-                                             "grader_cpu": c.get("grader_cpu"), "messages": c.get("messages"),
-                                             "limit": c.get("limit")}),
-                       "reference_alone": _rounded({"wall": r.get("seconds"), "cpu": r.get("grader_cpu")})}
-    sum_of = lambda side, key: round(sum((t[side].get(key) or 0) for t in tests.values()), 3)  # noqa: E731
+        tests[node] = _rounded({"wall": c.get("span", c.get("seconds")), "worker_cpu": c.get("worker_cpu"),
+                                "grader_cpu": c.get("grader_cpu"), "messages": c.get("messages"), "limit": c.get("limit"),
+                                "reference_alone_wall": r.get("seconds"), "reference_alone_cpu": r.get("grader_cpu")})
+    sum_of = lambda side, key: round(sum((t.get(key if side == "complete" else f"reference_alone_{key}") or 0)  # noqa: E731
+                                         for t in tests.values()), 3)
     return {"meta": {**meta(), "load_before": load_before},
             "complete": {"score": result.score, "max_score": result.max_score, "wall": round(complete_wall, 3),
                          "grading_process_cpu": round(complete_cpu, 3), "tests_wall": sum_of("complete", "wall"),
@@ -173,6 +179,7 @@ def per_test(assignment: str) -> dict:
                                 "wall": round(alone_wall, 3), "cpu": round(alone_cpu, 3),
                                 "tests_cpu": sum_of("reference_alone", "cpu")},
             "infinite_loop": {"score": looping.score, "max_score": looping.max_score, "wall": round(looping_wall, 3),
+                              "wall_without_per_test_limits": round(looping_without_wall, 3),
                               "tests_near_their_limit": timeouts},
             "tests": tests}
 
@@ -187,6 +194,8 @@ def main() -> None:
                         help="only time grading hw0's untouched sample with a warm grader (median of 3)")
     parser.add_argument("--startup", action="store_true",
                         help="only compare the start-up of one batch per assignment with one batch for them all")
+    parser.add_argument("--per-test-only", action="store_true",
+                        help="only the per-test records (no class), merged into the results file")
     parser.add_argument("--per-test", action="store_true",
                         help="also record where each hidden test's time goes (complete sample and reference alone)")
     parser.add_argument("--no-reference-cache", action="store_true",
@@ -217,6 +226,19 @@ def main() -> None:
             print(f"wrote {out}")
         return
     rows = []
+    if args.per_test_only:
+        details = {a: per_test(a) for a in ids}
+        for a, d in details.items():
+            print(f"{a}: looping sample {d['infinite_loop']['wall']:.1f} s with per-test limits, "
+                  f"{d['infinite_loop']['wall_without_per_test_limits']:.1f} s without", flush=True)
+        if args.record:
+            out = REPO / "bench" / "results" / "class_throughput.json"
+            data = json.loads(out.read_text()) if out.exists() else {}
+            data.setdefault("meta", EARLIER_META)
+            data["per_test"] = {**data.get("per_test", {}), **details}
+            out.write_text(json.dumps(data, indent=1) + "\n")
+            print(f"wrote {out}")
+        return
     with tempfile.TemporaryDirectory() as tmp:
         for assignment in ids:
             root = Path(tmp) / assignment
