@@ -45,8 +45,8 @@ def solution_notebook(assignment: str, title: str) -> nbformat.NotebookNode:
     cells = [
         new_markdown_cell(f"# {assignment}: {title}\n\n"
                           "What this chapter teaches, why it matters, and which lecture it follows: "
-                          "[the lectures](../../lectures/intro.md). Each stub below says which equation it "
-                          "implements."),
+                          "[the lectures](../../lectures/intro.md#What-the-course-covers). Each stub below links "
+                          "the section and equation it implements."),
         new_code_cell("FAST = False", metadata={"tags": ["parameters"]}),
         _setup("setup_imports", "import numpy as np\n\nEPISODES = 3 if FAST else 100"),
         new_markdown_cell("## Returns to go\n\nThe return from step $t$ on is $G_t = \\sum_{k \\ge t} "
