@@ -37,6 +37,18 @@ Apart from a worker's own start deadline: on a loaded machine with a cold disk t
 take longer than a worker may take to start, and a slow machine is the grader's fault, not a student's."""
 
 
+def zygote_environment() -> dict[str, str]:
+    """The zygote's (so every worker's) environment: the safe variables only, with this grader's own checkout
+    first on ``PYTHONPATH``, so that workers import the same sandbox and course library as the grader even
+    when the Python environment was installed (editable) from another checkout."""
+    from autograder.core import course
+
+    env = safe_environment(dict(os.environ))
+    rest = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env["PYTHONPATH"] = os.pathsep.join([str(course.INSTALLED), *rest])
+    return env
+
+
 class Zygote:
     """A pristine, pre-imported process that forks workers on request."""
 
@@ -45,7 +57,7 @@ class Zygote:
         self.process = subprocess.Popen(
             [sys.executable, "-m", "autograder.sandbox.zygote", str(child.fileno()), json.dumps(preload),
              str(os.getpid())],
-            pass_fds=[child.fileno()], stdin=subprocess.DEVNULL, cwd="/", env=safe_environment(dict(os.environ)))
+            pass_fds=[child.fileno()], stdin=subprocess.DEVNULL, cwd="/", env=zygote_environment())
         child.close()
         self.sock = parent
         self.lock = threading.Lock()

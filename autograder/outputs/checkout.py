@@ -2,12 +2,12 @@
 
 A virtual environment with the kit installed in editable mode points at the checkout it was made
 in. Grading another copy of the course with it (``/a/.venv/bin/python -m autograder batch ...`` run
-in ``/b``) runs ``/b``'s grader and suites, but the sandbox workers start from ``/`` and import
-``autograder.sandbox`` and ``rlcourse`` from ``/a``: students would be graded against another
-library and sandbox than the suites expect, and nothing would say so. :func:`checkout_problem`
-asks a fresh interpreter, started as the workers are (same executable, same environment, from
-``/``), where it finds both packages, and compares them with the packages this process runs and
-with the course being graded.
+in ``/b``) runs ``/b``'s grader and suites, while workers started from ``/`` would import
+``autograder.sandbox`` and ``rlcourse`` from ``/a``. The zygote therefore starts with the grader's own
+checkout first on ``PYTHONPATH`` (:func:`autograder.core.supervisor.zygote_environment`), so that both
+import one checkout; :func:`checkout_problem` checks that it does, asking a fresh interpreter started
+as the workers are (same executable, the zygote's environment, from ``/``) where it finds both packages,
+and refuses, naming both paths, if that ever fails.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from autograder.sandbox.config import safe_environment
+from autograder.core.supervisor import zygote_environment
 
 _FIND = ("import importlib.util, json\n"
          "out = {}\n"
@@ -31,8 +31,7 @@ _FIND = ("import importlib.util, json\n"
 def worker_packages() -> dict[str, Path | None]:
     """Where an interpreter started as the sandbox's workers are (this executable, this environment, from ``/``)
     finds the ``autograder`` and ``rlcourse`` packages (found, not imported)."""
-    done = subprocess.run([sys.executable, "-c", _FIND], cwd="/", env=safe_environment(dict(os.environ)),
-                          capture_output=True,
+    done = subprocess.run([sys.executable, "-c", _FIND], cwd="/", env=zygote_environment(), capture_output=True,
                           text=True, timeout=60)
     if done.returncode != 0:
         raise SystemExit(f"cannot tell where the sandbox imports the grader from:\n{done.stderr[-1000:]}")
