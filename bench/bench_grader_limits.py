@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import datetime
 import json
 import os
 import socket
@@ -142,8 +143,12 @@ def main(argv: list[str] | None = None) -> int:
           f"slowest: {slowest:.1f} s (bound {wall_bound():.0f} s)")
     if not args.case:
         out = REPO / "bench" / "results" / "grader_limits.json"
-        out.write_text(json.dumps({"memory_ratio_bound": MEMORY_RATIO, "wall_bound_s": wall_bound(), "rows": rows},
-                                  indent=2) + "\n")
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=REPO).stdout.strip()
+        meta = {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
+                "machine": "2-core CPU"}
+        out.write_text(json.dumps({"meta": meta, "memory_ratio_bound": MEMORY_RATIO, "wall_bound_s": wall_bound(),
+                                   "rows": rows}, indent=2) + "\n")
         print(f"wrote {out.relative_to(REPO)}")
     return 0 if all(r["within_memory"] and r["within_time"] for r in rows) else 1
 
