@@ -17,12 +17,12 @@ $(STAMP): pyproject.toml lectures/requirements.txt
 		echo "installing chromium for the browser tests"; \
 		DEBIAN_FRONTEND=noninteractive apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium \
 			|| echo "could not install chromium: tests/test_browser.py will skip"; fi
-	@# Slurm and munge for tests/test_slurm.py (a single-node Slurm of its own grades a class as a job array):
+	@# Slurm and munge for tests/outputs/test_slurm.py (a single-node Slurm of its own grades a class as a job array):
 	@# installed as root, else the test says it skips.
 	@if [ "$$(id -u)" = 0 ] && ! PATH="$$PATH:/usr/sbin:/sbin" command -v slurmctld >/dev/null && command -v apt-get >/dev/null; then \
 		echo "installing slurm-wlm and munge for the Slurm test"; \
 		DEBIAN_FRONTEND=noninteractive apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge \
-			|| echo "could not install slurm-wlm and munge: tests/test_slurm.py will skip"; fi
+			|| echo "could not install slurm-wlm and munge: tests/outputs/test_slurm.py will skip"; fi
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -1,6 +1,6 @@
 """The grader's peak memory and wall time per submission, over the adversarial corpus.
 
-Each submission of the corpus (``tests/test_adversarial.py``: its cheating and harmful cases and its
+Each submission of the corpus (``tests/core/test_adversarial.py``: its cheating and harmful cases and its
 hostile files) is graded alone, in a fresh grading process of the fixture course's ``fx`` assignment,
 and compared with the untouched release notebook graded the same way. The grader's peak resident
 memory must stay within twice the untouched notebook's, and its wall time within the assignment's
@@ -24,7 +24,7 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests"))
+sys.path[:0] = [str(REPO / "tests"), str(REPO / "tests" / "core")]  # conftest, and the corpus of test_adversarial
 
 GRADE_ONE = """
 import json, resource, sys, time

@@ -258,15 +258,15 @@ CASES = {
     "import_course_files_outside_the_release": """
         import importlib.util, os, sys
         FOUND = []
-        for rel in ["tests/lecture_math.py", "tests/conftest.py", "bench/bench_hw3_preferences.py",
+        for rel in ["tests/lectures/lecture_math.py", "tests/conftest.py", "bench/bench_hw3_preferences.py",
                     "datasets/scripts/make_hw4_reward_model.py", "lectures/figures/make_figures.py", ".git/config",
-                    "autograder/grader.py", "autograder/suites/hw0_setup/test_discounted_returns.py", "README.md",
+                    "autograder/core/grader.py", "autograder/suites/hw0_setup/test_discounted_returns.py", "README.md",
                     "solutions/hw0_setup/hw0_setup.ipynb", "autograder/samples/hw0_setup/complete.ipynb"]:
             try:
                 FOUND += [text for text in [open(os.path.join(COURSE_CODE, rel)).read()] if text]  # a mask reads empty
             except OSError:
                 pass
-        sys.path[:0] = [os.path.join(COURSE_CODE, "tests"), os.path.join(COURSE_CODE, "datasets", "scripts")]
+        sys.path[:0] = [os.path.join(COURSE_CODE, "tests", "lectures"), os.path.join(COURSE_CODE, "datasets", "scripts")]
         for module in ("lecture_math", "make_hw4_reward_model", "autograder.core.grader", "autograder.suites"):
             try:
                 FOUND.append(str(importlib.import_module(module)))

@@ -62,7 +62,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 TESTS = Path(__file__).resolve().parent
-REPO = TESTS.parent
+REPO = TESTS.parents[1]
 LECTURES = REPO / "lectures"
 TEST_GLOB = "test_lecture_*.py"  # the modules whose @checks count (all are imported by the coverage test)
 

@@ -11,7 +11,7 @@ import pytest
 
 from rlcourse import drift
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 NOTEBOOKS = [REPO / "solutions/hw1_imitation/hw1_imitation.ipynb", REPO / "assignments/hw1_imitation/hw1_imitation.ipynb"]
 RESULTS = REPO / "bench/results/hw1_imitation.json"
 

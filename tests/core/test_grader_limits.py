@@ -12,7 +12,7 @@ import pytest
 
 pytestmark = pytest.mark.slow
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 HEAVY = ["reply_that_inflates", "many_maximal_blobs", "huge_return_value", "worker_stops_reading",
          "calls_back_for_ever", "output_flood", "json_that_inflates", "very_long_expression", "forge_the_outputs",
          "recursion_and_deep_nesting"]

@@ -180,7 +180,7 @@ def test_the_chapters_averaging_table_is_the_benchmarks():
     """The table of sec-mm-bites quotes bench/results/hw1b_multimodal.json (mean ± std over its 5 seeds)."""
     import json
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     record = json.loads((root / "bench" / "results" / "hw1b_multimodal.json").read_text())
     text = (root / "lectures" / "01b_multimodal.md").read_text()
     ms = lambda x: f"{np.mean(x):.2f} ± {np.std(x):.2f}"  # noqa: E731
