@@ -10,8 +10,6 @@ formgrader writes it), a suite fix and a regrade, the Canvas export and the feed
 from __future__ import annotations
 
 import csv
-import io
-import json
 import os
 import re
 import shutil
@@ -33,6 +31,7 @@ from autograder.outputs.checkout import checkout_problem, worker_packages
 from autograder.outputs.files import write_gradebook, write_outputs
 from autograder.outputs.formgrader_guard import AUTOGRADE_REFUSED, GENERATE_REFUSED
 from autograder.outputs.text import markdown_text
+from test_term import empty_gradebook, new_course  # noqa: F401 - fixtures shared with the term test
 from conftest import FIXTURE_COURSE, REPO
 
 POINTS = {"scaled_sum": 3.0, "Counter": 2.0, "mean_of": 1.0, "double_scaled": 1.0}
@@ -55,23 +54,6 @@ def submission(path: Path, answer: str = "YOUR ANSWER HERE") -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     nbformat.write(nb, str(path))
     return path
-
-
-@pytest.fixture(scope="module")
-def empty_gradebook(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("template")
-    shutil.copy(REPO / "nbgrader_config.py", root / "nbgrader_config.py")
-    gradebook.open_gradebook(gradebook.course_directory(root)).close()
-    return root / ".nbgrader" / "gradebook.db"
-
-
-@pytest.fixture
-def new_course(tmp_path, empty_gradebook) -> Path:
-    root = tmp_path / "course"
-    (root / ".nbgrader").mkdir(parents=True)
-    shutil.copy(REPO / "nbgrader_config.py", root / "nbgrader_config.py")
-    shutil.copy(empty_gradebook, root / ".nbgrader" / "gradebook.db")
-    return root
 
 
 def nbgrader(*args: str, cwd: Path) -> str:
