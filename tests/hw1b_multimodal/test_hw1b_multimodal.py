@@ -13,9 +13,9 @@ from rlcourse import multimodal as mm  # noqa: E402
 from rlcourse import racetrack as rt  # noqa: E402
 
 
-def drive(policy, n, seed):
+def drive(policy, n, seed, task=mm.CLOSED_LOOP):
     """Per-step rollout of a policy on ObstacleTracks (the notebook's chunked_rollout with k = 1, written here)."""
-    env = mm.ObstacleTracks(n, seed)
+    env = mm.ObstacleTracks(n, seed, task)
     obs, observations, running = env.reset(), [], []
     while not env.done.all():
         observations.append(obs)
@@ -150,18 +150,8 @@ def test_on_the_commit_tasks_the_split_is_at_the_first_state_and_the_mean_chunk_
     mean = mm.open_loop_offsets(obs, (left + right) / 2)
     assert np.all(np.abs(mean) < mm.OBSTACLE_RADIUS), "the average of the two chunks leads into the obstacle's width"
     sides = np.random.default_rng(2).choice([1, -1], size=20)
-    obs, mask = drive_task(mm.ObstacleExpert(sides, task=task).act, 20, 5, task)
+    obs, mask = drive(mm.ObstacleExpert(sides, task=task).act, 20, 5, task)
     assert mask.sum(axis=1).tolist() == [task.horizon] * 20 and mm.passing_sides(obs, mask).tolist() == sides.tolist()
-
-
-def drive_task(policy, n, seed, task):
-    env = mm.ObstacleTracks(n, seed, task)
-    obs, observations, running = env.reset(), [], []
-    while not env.done.all():
-        observations.append(obs)
-        running.append(~env.done)
-        obs, _, _, _ = env.step(policy(obs))
-    return np.stack(observations, axis=1), np.stack(running, axis=1)
 
 
 def test_the_averaging_results_are_recorded_per_seed_for_every_setting():
