@@ -38,7 +38,6 @@ Before and after a change, on a loaded machine, alternate the two (the earlier c
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import select
@@ -51,6 +50,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from bench import run_record  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -102,17 +102,8 @@ def schedstat(pid: int) -> tuple[int, int]:
 
 
 def meta() -> dict:
-    if os.environ.get("BENCH_COMMIT"):  # a copy of an earlier commit's grader (git archive), run for a paired comparison
-        commit, dirty = os.environ["BENCH_COMMIT"], ""
-    else:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=REPO).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "autograder/sandbox", "autograder/core"],
-                               capture_output=True, text=True, cwd=REPO).stdout.strip()
-    return {"commit": commit, "grader_files_changed_since_commit": bool(dirty),
-            "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()), "machine": "2-core CPU",
-            "python": sys.version.split()[0]}
-
+    """The run's record; ``uncommitted_files`` counts the grader's own files changed since the commit."""
+    return run_record.meta(["autograder/sandbox", "autograder/core"])
 
 def start_session():
     from autograder.core import course

@@ -41,6 +41,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
 MIX = {"complete": 10, "partial": 6, "untouched": 2, "broken_exception": 1, "infinite_loop": 1}
 
 
@@ -107,17 +108,6 @@ def startup(ids: list[str], jobs: int) -> dict:
                                          "per_assignment": {a: {"wall": round(w, 2), "cpu": round(c, 2)}
                                                             for a, (w, c) in separate.items()}},
             "one_batch_for_all": {"wall": round(wall, 2), "cpu": round(cpu, 2)}}
-
-
-def _commit() -> str:
-    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO).stdout.strip()
-
-
-def meta() -> dict:
-    import datetime
-
-    return {"commit": _commit(), "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-            "machine": "2-core CPU"}
 
 
 def _rounded(stats: dict[str, float]) -> dict[str, float]:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import datetime
 import json
 import os
 import socket
@@ -25,6 +24,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO / "tests"), str(REPO / "tests" / "core")]  # conftest, and the corpus of test_adversarial
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
 
 GRADE_ONE = """
 import json, resource, sys, time
@@ -143,11 +144,7 @@ def main(argv: list[str] | None = None) -> int:
           f"slowest: {slowest:.1f} s (bound {wall_bound():.0f} s)")
     if not args.case:
         out = REPO / "bench" / "results" / "grader_limits.json"
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=REPO).stdout.strip()
-        meta = {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-                "machine": "2-core CPU"}
-        out.write_text(json.dumps({"meta": meta, "memory_ratio_bound": MEMORY_RATIO, "wall_bound_s": wall_bound(),
+        out.write_text(json.dumps({"meta": meta(), "memory_ratio_bound": MEMORY_RATIO, "wall_bound_s": wall_bound(),
                                    "rows": rows}, indent=2) + "\n")
         print(f"wrote {out.relative_to(REPO)}")
     return 0 if all(r["within_memory"] and r["within_time"] for r in rows) else 1

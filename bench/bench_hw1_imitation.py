@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import datetime
 import json
 import os
 import subprocess
@@ -63,6 +62,8 @@ from rlcourse.nets import GaussianPolicy, load_policy
 from rlcourse.rollouts import rollout
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
 NOTEBOOK = REPO / "solutions" / "hw1_imitation" / "hw1_imitation.ipynb"
 ENVS = ("Hopper-v5", "HalfCheetah-v5")
 SEEDS = (0, 1, 2)
@@ -206,13 +207,6 @@ class Bench:
         print(f"| DAgger, 1 demo + {RACE_ITERS} iterations | {len(obs)} (seed {SEEDS[-1]}) | "
               f"{frac(rows['dagger'], expert_return)} |")
         print()
-
-
-def meta() -> dict:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO).stdout.strip()
-    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-            "machine": "2-core CPU"}
-
 
 def drift_runs(part: tuple[int, int]) -> None:
     """Run this part's (setting, seed) runs of the drift protocol, skipping those already in the partial file."""

@@ -59,10 +59,8 @@ skipped when the script is run again; the final file gets per-seed lists and a `
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import os
-import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -74,6 +72,8 @@ from rlcourse import data
 from rlcourse import multimodal as mm
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
 RESULTS = REPO / "bench" / "results" / "hw1b_multimodal.json"
 REG_STEPS, MIX_STEPS, FLOW_STEPS = 1500, 2000, 3000       # the notebook's full budget
 CHUNK, EXECUTE, EULER_STEPS = 4, 2, 10
@@ -344,13 +344,6 @@ def followup(seeds: list[int], episodes: int) -> dict:
             "question": "is flow matching's gap to the expert on the commit tasks a matter of training or of data?",
             "cells": {cell: {"flow_steps": st, "demonstrations": n} for cell, (st, n) in FOLLOWUP_CELLS.items()},
             "seeds": list(seeds), "episodes": episodes, "settings": settings, "meta": meta()}
-
-
-def meta() -> dict:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
-    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-            "machine": "2-core CPU"}
-
 
 def averaging_table(entry: dict) -> str:
     ms = lambda x: f"{np.mean(x):.2f} ± {np.std(x):.2f}"  # noqa: E731

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -39,6 +40,8 @@ import numpy as np
 from autograder.core.grader import build_reference
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench import run_record  # noqa: E402
 RESULTS = REPO / "bench" / "results" / "hw4_rlhf_dpo.json"
 PRECOMPUTED = REPO / "datasets" / "hw4" / "precomputed.json"
 FINAL_EPISODES = 20
@@ -304,15 +307,6 @@ def _protocol_job(kind: str, seed: int, value: float, steps: int | None, data: s
     return pref_job(kind, seed, value, steps, data)
 
 
-def _meta() -> dict:
-    import datetime
-    import subprocess
-
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
-    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-            "machine": "2-core CPU"}
-
-
 def preference_only(args, workers: int) -> dict:
     """Run the protocol: sweep on seed 0, choose the KL coefficient and beta from preference data and the
     policies alone, run the other seeds at the choices, then read the true returns once for the table."""
@@ -386,7 +380,7 @@ def preference_only(args, workers: int) -> dict:
     meta = rm.metadata
     covered = {str(c): ch["disagreement"] <= threshold for c, ch in kl_checks.items()}
     out = {
-        "meta": _meta(),
+        "meta": run_record.meta(),
         "protocol": "offset b = the reward model's data_offset (its absorbing state pays 0); KL coefficient: among "
                     f"{list(KL_CANDIDATES)} (seed 0), the highest learned return among policies whose mean ensemble "
                     "disagreement is at most the 90% quantile of held-out segments'; beta: among "

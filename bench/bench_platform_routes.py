@@ -19,7 +19,6 @@ one sample: the load recorded beside it says how shared it was.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import shutil
@@ -32,18 +31,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
 RESULTS = REPO / "bench" / "results" / "platform_routes.json"
 THREADS = {name: "1" for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
 RUN_LIMIT = 1200.0
 """A run still going after this long is stopped and recorded as such."""
-
-
-def meta() -> dict:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
-                            text=True).stdout.strip()
-    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-            "machine": "2-core CPU"}
-
 
 def timed(command: list[str], cwd: Path, env: dict[str, str]) -> tuple[float, int | None, float]:
     """Wall seconds, exit status (None when stopped at RUN_LIMIT) and the 1-minute load when it started."""

@@ -14,29 +14,21 @@ One run on a shared machine is one sample: the load recorded beside it says how 
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import re
 import resource
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
 RESULTS = REPO / "bench" / "results" / "test_fast.json"
 COUNT = re.compile(r"(\d+) (passed|failed|skipped|deselected|errors?|xfailed|xpassed|warnings?)")
 DURATION = re.compile(r"^\s*([\d.]+)s (call|setup|teardown)\s+(\S+)", re.M)
-
-
-def meta() -> dict:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
-                            text=True).stdout.strip()
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
-                           capture_output=True, text=True).stdout.splitlines()
-    return {"commit": commit, "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
-            "machine": "2-core CPU", "uncommitted_files": len(dirty)}
-
 
 def parse_summary(output: str) -> dict:
     """pytest's counts from its last summary line ("370 passed, 45 deselected in 112.3s")."""
