@@ -15,6 +15,8 @@
   assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
+  permissions [--root DIR] [--no-environment]   in a grading container: file modes that wall the hidden files
+                                     off a worker run without namespaces (the Gradescope and PrairieLearn routes)
   new ID [--title TEXT]              write a new assignment's two-stub skeleton (notebook, suite, samples)
   mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/authoring/mutants.py)
   nbgrader-sync, feedback, export, regrade, results-diff, class-report   the term after batch
@@ -193,6 +195,15 @@ def _cmd_student_release(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_permissions(args: argparse.Namespace) -> int:
+    from autograder.core.course import REPO, set_container_permissions
+
+    changed = set_container_permissions(args.root or REPO, environment=not args.no_environment)
+    print(f"{len(changed)} file modes changed under {args.root or REPO}" + (" (and its virtual environment)"
+                                                                          if not args.no_environment else ""))
+    return 0
+
+
 def _cmd_samples(args: argparse.Namespace) -> int:
     from autograder.authoring.samples import write_samples
 
@@ -274,6 +285,10 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("samples", help="regenerate sample submissions")
     p.add_argument("assignment")
     p.set_defaults(fn=_cmd_samples)
+    p = sub.add_parser("permissions", help="set the file modes a worker without namespaces needs (grading containers)")
+    p.add_argument("--root", type=Path, default=None, help="the course checkout (default: the one being graded)")
+    p.add_argument("--no-environment", action="store_true", help="leave the virtual environment's modes as they are")
+    p.set_defaults(fn=_cmd_permissions)
     p = sub.add_parser("new", help="write a new assignment's skeleton")
     p.add_argument("assignment")
     p.add_argument("--title", default="a new assignment")

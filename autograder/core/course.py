@@ -132,9 +132,55 @@ def sandbox_view(hide: "Iterable[Path]" = ()) -> "View":
     outermost = [p for p in paths if not any(p != q and p.startswith(q.rstrip("/") + "/") for q in paths)]
     inside = [Path(h).resolve() for h in hide if os.path.lexists(h)]
     masked += [h for h in inside if any(str(h).startswith(p.rstrip("/") + "/") for p in outermost)]
+    secret = [*masked, *inside, *(p for root in dict.fromkeys([INSTALLED, REPO]) for p in instructor_paths(Path(root)))]
     owner = INSTALLED.stat()
     return View(outermost, sorted({str(p) for p in (*masked, *(m.resolve() for m in masked))}),
-                (owner.st_uid, owner.st_gid))
+                (owner.st_uid, owner.st_gid), sorted({str(p) for p in (*secret, *(s.resolve() for s in secret))}))
+
+
+INSTRUCTOR_FOLDERS = ("solutions", "autograder/suites", "autograder/samples", "tests", "bench", ".git")
+"""Folders of a checkout outside the release whose content would answer or reveal a hidden test."""
+
+
+def instructor_paths(root: Path) -> list[Path]:
+    """What a worker must never read of the course at ``root``: the instructor folders and the instructor tools
+    inside released folders (those that exist)."""
+    return [p for p in (*(root / f for f in INSTRUCTOR_FOLDERS), *release_paths(root)[1]) if os.path.lexists(p)]
+
+
+def set_container_permissions(root: Path = REPO, environment: bool = True) -> list[str]:
+    """Make the file modes the only wall a worker needs where it runs without namespaces as a uid of its own
+    (isolation "none" as root, the Gradescope and PrairieLearn containers): the instructor paths readable by
+    their owner only, the release and the virtual environment readable by everyone, with every folder above
+    them searchable (a system Python, or any with ``environment`` false, is left as it is). Returns one line
+    per path changed. Meant for a grading container, run as the owner of the files (root, there): on a shared
+    machine it would widen the release and the virtual environment to every user."""
+    import stat
+    import sys
+
+    changed = []
+
+    def chmod(path: Path, mode: int) -> None:
+        current = stat.S_IMODE(path.lstat().st_mode)
+        if current != mode and not path.is_symlink():
+            os.chmod(path, mode)
+            changed.append(f"{mode:o} {path}")
+
+    for secret in instructor_paths(root):
+        for path in [secret, *(secret.rglob("*") if secret.is_dir() and not secret.is_symlink() else ())]:
+            chmod(path, stat.S_IMODE(path.lstat().st_mode) & 0o700)
+    shown = [n for p in release_paths(root)[0] for n in (release_notebooks(p) if p.name == "assignments" else [p])]
+    shown += [Path(sys.prefix)] if environment and sys.prefix != sys.base_prefix else []
+    hidden = {str(p) for p in instructor_paths(root)}
+    for top in shown:
+        for path in [top, *(top.rglob("*") if top.is_dir() else ())]:
+            if any(str(path) == h or str(path).startswith(h + "/") for h in hidden):
+                continue
+            mode = stat.S_IMODE(path.lstat().st_mode)
+            chmod(path, mode | (0o055 if path.is_dir() or mode & 0o100 else 0o044))
+        for parent in top.resolve().parents:
+            chmod(parent, stat.S_IMODE(parent.stat().st_mode) | 0o011)
+    return changed
 
 
 def suite_version(assignment: str) -> str:

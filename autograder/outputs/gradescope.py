@@ -52,8 +52,8 @@ ISOLATION = {
                       "a file system that shows only the course's release and the Python environment, its own "
                       "processes, resource limits).",
     "none": "Isolation: none, partial (this container refuses the namespaces the sandbox is built from, so the "
-            "submission ran under resource limits only, as the grader's own user, with the container's files "
-            "and network).",
+            "submission ran under resource limits, as a user of its own where the grader is root, with the "
+            "container's network and the files its modes let every user read).",
 }
 """The top-level output's line for each isolation level the sandbox reports."""
 
@@ -133,6 +133,9 @@ python3.11 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet {torch} --index-url {index}
 .venv/bin/python -m pip install --quiet -e .
+# Gradescope's containers refuse namespaces: the worker runs as a uid of its own, walled off the hidden
+# suites and solutions by their modes alone.
+.venv/bin/python -m autograder permissions
 """
 
 RUN_AUTOGRADER = """\

@@ -48,6 +48,10 @@ mkdir -p "$grade/results"
 install="${{RLCOURSE_INSTALL:-/opt/rlcourse}}"
 export RLCOURSE_REPO="$grade/serverFilesCourse/{folder}" PYTHONPATH="$install${{PYTHONPATH:+:$PYTHONPATH}}"
 cd "$install"
+# Where the container refuses namespaces, the worker runs as a uid of its own and file modes are its walls:
+# the hidden suite, the solution and the other grading folders readable by their owner only.
+chmod 700 "$grade/results" "$grade/student" 2>/dev/null
+.venv/bin/python -m autograder permissions --root "$RLCOURSE_REPO" --no-environment >/dev/null 2>&1
 exec .venv/bin/python -m autograder prairielearn {assignment} --root "$grade"
 """
 

@@ -61,11 +61,18 @@ class View:
     reads files with the file-system identity ``read_as`` (uid, gid): the owner of the course
     checkout, so that a checkout of mode 700 and files of mode 600 stay readable without being
     widened for anyone else.
+
+    Where no view can be built (isolation "none": a container that refuses namespaces) and the grader
+    runs as root, the worker runs as a uid of its own instead, and the file modes are the only wall:
+    ``secret`` are the paths it must then not reach (the hidden suites, the solutions, the grading's
+    inputs and outputs), ``expose`` those it must read. The worker refuses to start otherwise
+    (``python -m autograder permissions`` sets the modes).
     """
 
     expose: list[str] = field(default_factory=list)
     mask: list[str] = field(default_factory=list)
     read_as: tuple[int, int] = (0, 0)
+    secret: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -78,4 +85,5 @@ class SpawnConfig:
     @classmethod
     def from_json(cls, raw: dict) -> "SpawnConfig":
         view = raw["view"]
-        return cls(View(list(view["expose"]), list(view["mask"]), tuple(view["read_as"])), Limits(**raw["limits"]))
+        return cls(View(list(view["expose"]), list(view["mask"]), tuple(view["read_as"]), list(view.get("secret", []))),
+                   Limits(**raw["limits"]))

@@ -264,6 +264,50 @@ def _capabilities_empty() -> bool:
     return all(int(fields.get(k, "0").strip(), 16) == 0 for k in ("CapEff", "CapPrm", "CapBnd", "CapAmb"))
 
 
+def _reachable(path: str) -> bool:
+    """Whether this process can read ``path``, list it, or pass through it (a folder it can search)."""
+    return os.path.lexists(path) and (os.access(path, os.R_OK) or (os.path.isdir(path) and os.access(path, os.X_OK)))
+
+
+def _unreadable_in(top: str, skip: set[str], limit: int = 20000) -> str | None:
+    """The first file or folder under ``top`` (``top`` included, at most ``limit`` entries, none under ``skip``)
+    this process cannot read."""
+    if not os.access(top, os.R_OK | (os.X_OK if os.path.isdir(top) else 0)):
+        return top
+    seen = 0
+    for folder, dirs, files in os.walk(top, onerror=lambda err: None):
+        dirs[:] = [d for d in dirs if os.path.join(folder, d) not in skip]
+        for name in (*dirs, *files):
+            path = os.path.join(folder, name)
+            if path not in skip and not os.path.islink(path) and \
+                    not os.access(path, os.R_OK | (os.X_OK if os.path.isdir(path) else 0)):
+                return path
+            seen += 1
+            if seen >= limit:
+                return None
+    return None
+
+
+def check_file_modes(view: View, python: Iterable[str]) -> None:
+    """[worker, no view, own uid] Refuse to serve unless the modes wall the grading off: no ``view.secret``
+    path reachable, every exposed path readable (the course's folders entry by entry, the Python environments
+    ``python`` at their top only). Raises :class:`IsolationError` naming the first problem and the fix."""
+    fix = "run `python -m autograder permissions` as root in the course checkout (docs/grading.md)"
+    reachable = [p for p in view.secret if _reachable(p)]
+    if reachable:
+        raise IsolationError(0, f"no namespaces here, and a worker of its own uid could read {reachable[0]} "
+                                f"(the hidden suites and solutions must be readable by their owner only): {fix}")
+    prefixes = tuple(str(p).rstrip("/") + "/" for p in python)
+    for top in view.expose:
+        inside_python = any((top.rstrip("/") + "/").startswith(p) or p.startswith(top.rstrip("/") + "/")
+                            for p in prefixes)
+        problem = (top if not os.access(top, os.R_OK) else None) if inside_python else \
+            _unreadable_in(top, {*view.secret, *view.mask})
+        if problem:
+            raise IsolationError(0, f"no namespaces here, and a worker of its own uid could not read {problem}, "
+                                    f"which the course's release needs: {fix}")
+
+
 def close_fds_except(keep: Iterable[int]) -> None:
     """[worker] Close every inherited descriptor but ``keep`` (and 0, 1, 2)."""
     start = 3

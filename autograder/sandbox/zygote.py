@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import sys
+import tempfile
 
 from autograder.sandbox import isolation
 from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig, safe_environment
@@ -35,20 +37,25 @@ the file-system identity), which a checkout of mode 700 shuts out: such probes m
 
 
 def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, existing: int,
-                 launcher: int | None = None) -> None:
-    """[worker] Isolate, then serve; never returns. Any failure before serving is reported, then the worker dies."""
+                 launcher: int | None = None, workdir: str = WORKDIR) -> None:
+    """[worker] Isolate, then serve; never returns. Any failure before serving is reported, then the worker dies.
+
+    Without namespaces (``level`` "none") there is no view and no private ``/tmp``: the worker works in a
+    folder of its own (``workdir``, mode 700), and as root it still becomes a uid of its own, after which the
+    file modes must keep it from the hidden files (:func:`isolation.check_file_modes`) or it refuses to serve.
+    """
     to_worker, from_worker, output = fds
     try:
         if level != "none":
             isolation.build_view(config.view, config.limits.tmp_bytes)
-        own_uid = uid if level == "full" else None
-        os.makedirs(WORKDIR, exist_ok=True)
+        own_uid = uid if level == "full" or (level == "none" and os.geteuid() == 0) else None
+        os.makedirs(workdir, exist_ok=True)
         if own_uid is not None:
-            os.chown(WORKDIR, own_uid, own_uid)
-        os.chdir(WORKDIR)
+            os.chown(workdir, own_uid, own_uid)
+        os.chdir(workdir)
         keep = safe_environment(dict(os.environ))
         os.environ.clear()
-        os.environ.update(keep, HOME=WORKDIR, TMPDIR=WORKDIR, MPLCONFIGDIR=WORKDIR, MPLBACKEND="Agg")
+        os.environ.update(keep, HOME=workdir, TMPDIR=workdir, MPLCONFIGDIR=workdir, MPLBACKEND="Agg")
         os.dup2(output, 1)
         os.dup2(output, 2)
         devnull = os.open(os.devnull, os.O_RDONLY)
@@ -63,6 +70,11 @@ def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, exis
         isolation.set_limits(config.limits, config.limits.processes + (0 if own_uid is not None else existing))
         if level != "none":
             isolation.drop_privileges(own_uid, config.view.read_as)
+        else:
+            os.umask(0o077)  # what it writes in the shared /tmp or /dev/shm stays its own
+            if own_uid is not None:
+                isolation.drop_privileges(own_uid, (own_uid, own_uid))
+                isolation.check_file_modes(config.view, {sys.prefix, sys.base_prefix, sys.exec_prefix})
         _die_with_parent(launcher)
     except BaseException as err:  # noqa: BLE001 - report any set-up failure, then die
         try:
@@ -95,6 +107,7 @@ def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> N
     _die_with_parent(zygote)
     uid = WORKER_UID_BASE + os.getpid() % WORKER_UID_SPAN
     existing = isolation.processes_of(os.getuid())  # counted before the worker's /proc shows only its own namespace
+    workdir = tempfile.mkdtemp(prefix="autograder-worker-") if level == "none" else WORKDIR  # else a private /tmp
     sync_r, sync_w = os.pipe()
     pid = os.fork()
     if pid == 0:
@@ -102,7 +115,7 @@ def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> N
         os.read(sync_r, 1)
         os.close(sync_r)
         # In a new pid namespace the launcher is outside it (getppid() is 0): the worker cannot check it.
-        _boot_worker(config, fds, level, uid, existing, os.getppid() or None)
+        _boot_worker(config, fds, level, uid, existing, os.getppid() or None, workdir)
     os.close(sync_r)
     send_message(fds[1], {"ok": True, "pid": pid, "pgid": os.getpgid(0), "isolation": level})
     os.write(sync_w, b"go")
@@ -113,6 +126,8 @@ def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> N
         os.waitpid(pid, 0)
     except ChildProcessError:
         pass
+    if workdir != WORKDIR:
+        shutil.rmtree(workdir, ignore_errors=True)
     os._exit(0)
 
 

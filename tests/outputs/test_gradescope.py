@@ -9,6 +9,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -158,15 +159,24 @@ def test_bundle_grades_a_submission_in_a_gradescope_layout(tmp_path):
 @pytest.mark.slow
 def test_a_container_without_namespaces_says_its_isolation_is_partial(tmp_path):
     """Run as Gradescope's container would run it (root, Docker's default capabilities: no SYS_ADMIN): the sandbox
-    falls back to limits only, and results.json's top-level output says so."""
+    falls back to a worker of its own uid walled off by file modes (set by setup.sh's last line), and
+    results.json's top-level output says the isolation is partial."""
     if os.geteuid() != 0 or not shutil.which("setpriv"):
         pytest.skip("needs root and setpriv to take SYS_ADMIN away as a container runtime does")
+    for prefix in {sys.prefix, sys.base_prefix}:
+        if not all(os.stat(p).st_mode & 0o001 for p in [prefix, *map(str, Path(prefix).parents)]):
+            pytest.skip(f"the Python installation {prefix} is not reachable by other users (a container's is)")
+    tmp_path = Path(tempfile.mkdtemp(prefix="gradescope-"))  # pytest's folders are mode 700: nobody else gets in
     root = tmp_path / "autograder"
     source = _unpack(build_bundle("hw0_setup", tmp_path / "hw0_setup.zip"), root)
     shutil.copy(REPO / "autograder/samples/hw0_setup/partial.ipynb", root / "submission" / "my_work.ipynb")
+    assert "\n.venv/bin/python -m autograder permissions\n" in (source / "setup.sh").read_text()
+    subprocess.run([sys.executable, "-m", "autograder", "permissions", "--no-environment"], cwd=source, check=True,
+                   env=dict(os.environ, PYTHONPATH=str(source), RLCOURSE_REPO=str(source)), capture_output=True)
     done, _ = _run(source, root, ["setpriv", f"--bounding-set=-all,{DOCKER_DEFAULT_CAPABILITIES}", "--inh-caps=-all",
                                   "--"])
+    results = json.loads((root / "results" / "results.json").read_text()) if done.returncode == 0 else {}
+    shutil.rmtree(tmp_path, ignore_errors=True)
     assert done.returncode == 0, done.stderr[-2000:]
-    results = json.loads((root / "results" / "results.json").read_text())
     assert results["score"] == 5
     assert gradescope.ISOLATION["none"] in results["output"].splitlines()
