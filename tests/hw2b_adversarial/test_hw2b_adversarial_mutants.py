@@ -1,0 +1,83 @@
+"""hw2b's hidden suite against hand-written mutants of its reference solution: each is a common mistake in one stub.
+
+Every mutant is the complete solution with one text replacement in one stub. Graded by the real grader (sandbox
+and all), each must lose points on its own stub and keep full marks elsewhere. The table printed with ``-s`` is
+the mutation report quoted in the report to README: killed (lost points) out of mutants, per stub.
+
+    .venv/bin/pytest -q -s tests/hw2b_adversarial/test_hw2b_adversarial_mutants.py
+"""
+from __future__ import annotations
+
+import pytest
+
+from autograder.core import course
+from autograder.outputs.files import grade_folder
+from autograder.authoring.samples import solution_sources
+from conftest import with_cells
+
+pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
+
+ID = "hw2b_adversarial"
+LOSS = "return F.softplus(-expert_logits).mean() + F.softplus(policy_logits).mean()"
+
+# stub -> {mutant name: (text in the solution, replacement)}
+MUTANTS = {
+    "discriminator_loss": {
+        "log of a sigmoid": (LOSS, "return -torch.log(torch.sigmoid(expert_logits)).mean() "
+                                   "- torch.log(1 - torch.sigmoid(policy_logits)).mean()"),
+        "one mean over both sides": (LOSS, "return torch.cat([F.softplus(-expert_logits), F.softplus(policy_logits)]).mean()"),
+        "average of the two sides": (LOSS, "return 0.5 * (F.softplus(-expert_logits).mean() + F.softplus(policy_logits).mean())"),
+        "labels swapped": (LOSS, "return F.softplus(expert_logits).mean() + F.softplus(-policy_logits).mean()"),
+        "expert side only": (LOSS, "return F.softplus(-expert_logits).mean()"),
+        "policy side detached": (LOSS, "return F.softplus(-expert_logits).mean() + F.softplus(policy_logits.detach()).mean()"),
+        "sums": (LOSS, "return F.softplus(-expert_logits).sum() + F.softplus(policy_logits).sum()"),
+    },
+    "airl_logits": {
+        "done ignored": ("gamma * (1.0 - done) * h_next", "gamma * h_next"),
+        "done drops h(s) instead": ("gamma * (1.0 - done) * h_next - h", "gamma * h_next - (1.0 - done) * h"),
+        "log pi added": ("return f - log_pi", "return f + log_pi"),
+        "log pi forgotten": ("return f - log_pi", "return f"),
+        "gamma on h(s)": ("gamma * (1.0 - done) * h_next - h", "(1.0 - done) * h_next - gamma * h"),
+        "shaping reversed": ("gamma * (1.0 - done) * h_next - h", "h - gamma * (1.0 - done) * h_next"),
+        "log of pi taken again": ("return f - log_pi", "return f - torch.log(log_pi.exp() + 1e-3)"),
+        "done inverted": ("(1.0 - done)", "done"),
+    },
+    "policy_reward": {
+        "gail as log D": ('    if kind == "gail":\n        return F.softplus(logits)',
+                          '    if kind == "gail":\n        return -F.softplus(-logits)'),
+        "gail through log(1 - sigmoid)": ("return F.softplus(logits)", "return -torch.log(1 - torch.sigmoid(logits))"),
+        "logd through log(sigmoid)": ("return -F.softplus(-logits)", "return torch.log(torch.sigmoid(logits))"),
+        "logd as minus the gail reward": ("return -F.softplus(-logits)", "return -F.softplus(logits)"),
+        "airl as the gail reward": ('    if kind == "airl":\n        return logits', '    if kind == "airl":\n        return F.softplus(logits)'),
+        "unknown kinds fall through": ('    raise ValueError', '    return logits\n    raise ValueError'),
+        "gail detached": ("return F.softplus(logits)", "return F.softplus(logits.detach())"),
+        "kinds matched loosely": ('if kind == "gail":', 'if kind.lower() == "gail":'),
+    },
+}
+
+
+def test_every_mutant_loses_points_on_its_own_stub_and_only_there(open_tmp):
+    solved = solution_sources(ID)
+    complete = course.samples_dir(ID) / "complete.ipynb"
+    folder = open_tmp / "mutants"
+    names = {}
+    for stub, mutants in MUTANTS.items():
+        for i, (label, (old, new)) in enumerate(mutants.items()):
+            assert solved[stub].count(old) >= 1, f"{stub} / {label}: the text to mutate is not in the solution"
+            name = f"{stub}__{i}"
+            names[name] = (stub, label)
+            with_cells(complete, folder / f"{name}.ipynb", {stub: solved[stub].replace(old, new)})
+    results = {r.submission: r for r in grade_folder(ID, folder, open_tmp / "out", jobs=2, progress=False)}
+    survivors, leaks, report = [], [], {}
+    for name, (stub, label) in names.items():
+        scores = {s.name: (s.score, s.max_score) for s in results[name].stubs}
+        killed = scores[stub][0] < scores[stub][1]
+        report.setdefault(stub, []).append(killed)
+        if not killed:
+            survivors.append(f"{stub}: {label}")
+        leaks += [f"{stub}: {label} cost {other}" for other, (got, top) in scores.items() if other != stub and got < top]
+    print("\n| stub | mutants | killed |\n|---|---:|---:|")
+    for stub, kills in report.items():
+        print(f"| `{stub}` | {len(kills)} | {sum(kills)} ({sum(kills) / len(kills):.0%}) |")
+    assert not leaks, leaks
+    assert not survivors, f"mutants the suite does not catch: {survivors}"
