@@ -33,6 +33,9 @@ the section stays cheap: regression on the ratings (pooled, or with one offset p
 Bradley–Terry on comparisons (the half-win convention of hw3), Plackett–Luce on rankings. Each is
 scored as hw3 scores its reward ensembles: held-out accuracy on the shipped test labels, divided by
 the Bayes ceiling.
+
+The conversion of ratings into within-annotator comparisons is hw3's stub ``ratings_to_comparisons``;
+no function here computes it (:func:`run_budget` takes it as an argument).
 """
 from __future__ import annotations
 
@@ -135,31 +138,6 @@ def simulate_rankings(returns: np.ndarray, groups: np.ndarray, panel: Panel, rng
     return np.argsort(-v, axis=1, kind="stable")
 
 
-# --------------------------------------------------------------------------- the conversion (hw3's stub)
-def ratings_to_comparisons(annotator: np.ndarray, segment: np.ndarray, rating: np.ndarray,
-                           window: int = 5) -> tuple[np.ndarray, np.ndarray]:
-    """Within-annotator comparisons from ratings given in session order (the reference of hw3's stub).
-
-    Each rating is paired with each of the next ``window`` ratings *by the same annotator*; a pair
-    whose two ratings are of the same segment is skipped. Returns ``pairs`` ``(M, 2)`` int64 (earlier
-    rating's segment first) and ``mu`` ``(M,)`` float (1 when the earlier rating is higher, 0.5 when
-    equal, 0 when lower).
-    """
-    annotator, segment, rating = np.asarray(annotator), np.asarray(segment), np.asarray(rating, dtype=float)
-    pairs, mu = [], []
-    for k in np.unique(annotator):
-        rows = np.flatnonzero(annotator == k)
-        for lag in range(1, window + 1):
-            a, b = rows[:-lag], rows[lag:]
-            keep = segment[a] != segment[b]
-            a, b = a[keep], b[keep]
-            pairs.append(np.stack([segment[a], segment[b]], 1))
-            mu.append(0.5 + 0.5 * np.sign(rating[a] - rating[b]))
-    if not pairs:
-        return np.zeros((0, 2), np.int64), np.zeros(0)
-    return np.concatenate(pairs).astype(np.int64), np.concatenate(mu).astype(float)
-
-
 # --------------------------------------------------------------------------- reward models (linear)
 def fit_regression(X: np.ndarray, y: np.ndarray, groups: np.ndarray | None = None, ridge: float = 1e-3) -> np.ndarray:
     """Least squares ``y ~ X w + intercept`` (one intercept per group when ``groups`` is given); returns ``w``."""
@@ -216,12 +194,13 @@ def labels_for_budget(seconds: float) -> dict[str, int]:
 
 
 def run_budget(prefs: HopperPreferences, features: np.ndarray, panel: Panel, seconds: float, seed: int,
-               to_comparisons: Callable = ratings_to_comparisons, window: int = 5) -> dict[str, float]:
+               to_comparisons: Callable, window: int = 5) -> dict[str, float]:
     """Accuracy over the ceiling of the five reward models (:data:`METHODS`) from ``seconds`` of annotation.
 
     Segments are drawn uniformly from the training segments (those not held out), afresh per answer
     type; every draw of ``seed`` is independent of the others. ``to_comparisons(annotator, segment,
-    rating, window)`` converts ratings (hw3 passes the student's function).
+    rating, window)`` converts ratings to within-annotator comparisons: hw3's stub of that name, which
+    this module does not define (the notebook passes the student's function, the bench its own copy).
     """
     returns = prefs.returns
     pool = np.flatnonzero(~prefs.test_segment)
