@@ -1,0 +1,258 @@
+"""Benchmark of hw2b (adversarial imitation and reward transfer): the transfer table, the notebook's budgets, and a
+check of the three stubs against the `imitation` library's GAIL and AIRL code on the same problem.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_hw2b_adversarial.py [--seeds 5] [--notebook]
+
+1. **Transfer table.** For each seed, ``rlcourse.adversarial.transfer_experiment`` with hw2b's full budgets (its
+   parameters cell with ``FAST = False``, repeated in ``BUDGET`` below and checked against the notebook by
+   ``tests/hw2b_adversarial``) and the reference solutions of the three stubs (the solution notebook's setup and
+   stub cells, executed here): demonstrations in the training world, BC, MaxEnt IRL, GAIL and AIRL fitted on
+   them, then in each of the four worlds (``WORLD_NAMES``, fixed in ``transfer_worlds`` before any learner was
+   run) the normalised true return of each carried-over policy and of each policy retrained from scratch on a
+   recovered reward. Seeds 0..4 are the notebook's seeds, so the notebook's table is seed for seed this one.
+2. **Budgets** (``--notebook``): the solution notebook executed with ``FAST = True`` and with ``FAST = False``,
+   wall time of each.
+3. **imitation** (version pinned in ``bench/requirements-hw2.txt``; its own venv, ``--bench-python``): seed 0's
+   trained discriminators, evaluated on its demonstrations and on a batch of the final policy's transitions,
+   are handed to imitation's ``ShapedRewardNet`` + ``AIRL.logits_expert_is_high`` (AIRL's logits),
+   ``RewardNetFromDiscriminatorLogit`` (GAIL's policy reward) and its discriminator loss expression
+   (``binary_cross_entropy_with_logits`` over the pooled batch); the largest differences from ours are
+   recorded. imitation's trainers themselves (PPO generators on a gym environment) are not run: they would need
+   an environment wrapper and minutes of PPO per seed, and this problem's learners are exact-planning ones.
+
+Writes ``bench/results/hw2b_adversarial.json``: per seed and learner the score in every world, per seed the
+adversarial learners' final training-world scores and the wall time, the mean and standard deviation over
+seeds, the imitation check, the notebook budgets, and ``meta``.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
+
+NOTEBOOK = REPO / "solutions" / "hw2b_adversarial" / "hw2b_adversarial.ipynb"
+RESULTS = REPO / "bench" / "results" / "hw2b_adversarial.json"
+# hw2b's full budgets (its parameters cell with FAST = False).
+BUDGET = dict(GRID_SIZE=10, HORIZON=25, N_DEMOS=100, N_ITERS=150, N_SEEDS=5, AIRL_GAMMA=0.9, GAIL_ENTROPY=0.0)
+
+
+def solution_namespace(path: Path = NOTEBOOK) -> dict:
+    """The solution notebook's setup and stub cells, executed in a fresh namespace."""
+    import nbformat
+
+    ns: dict = {"__name__": "__bench__"}
+    for cell in nbformat.read(path, as_version=4).cells:
+        info = cell.metadata
+        if cell.cell_type == "code" and ("setup" in info.get("tags", []) or info.get("nbgrader", {}).get("solution")):
+            with contextlib.redirect_stdout(io.StringIO()):
+                exec(compile(cell.source, f"<{info.get('nbgrader', {}).get('grade_id')}>", "exec"), ns)
+    return ns
+
+
+def run_seed(ns: dict, worlds: dict, seed: int) -> tuple[dict, dict]:
+    """One seed of the transfer test: its row for the results file and the raw run (for the imitation check)."""
+    from rlcourse.adversarial import normalised_return
+
+    start = time.perf_counter()
+    run = ns["transfer_experiment"](worlds, seed, BUDGET["N_DEMOS"], ns["discriminator_loss"], ns["policy_reward"],
+                                    ns["airl_logits"], n_iters=BUDGET["N_ITERS"], airl_gamma=BUDGET["AIRL_GAMMA"],
+                                    gail_entropy=BUDGET["GAIL_ENTROPY"])
+    row = {"scores": run["scores"], "wall_s": round(time.perf_counter() - start, 2),
+           "maxent_weights": run["maxent_weights"].tolist(),
+           "final_training_score": {k: float(run[k]["history"]["score"][-1]) for k in ("gail", "airl")},
+           "final_discriminator_accuracy": {k: [float(run[k]["history"]["expert_accuracy"][-1]),
+                                                float(run[k]["history"]["policy_accuracy"][-1])] for k in ("gail", "airl")},
+           "own_policy_training_world": {k: normalised_return(worlds["original"], run[k]["policy"])
+                                         for k in ("gail", "airl")}}
+    return row, run
+
+
+def imitation_inputs(ns: dict, worlds: dict, run: dict, path: Path) -> dict:
+    """Seed 0's discriminators on its demonstrations and on as many transitions of its final policies, and our
+    three stubs' outputs on them, saved for the worker."""
+    import torch
+
+    from rlcourse.adversarial import sample_transitions
+
+    train = worlds["original"]
+    demos = run["demos"]
+    horizon = train.horizon
+    out = {"n_states": train.n_states, "n_actions": train.n_actions, "gamma": BUDGET["AIRL_GAMMA"]}
+    for kind in ("gail", "airl"):
+        res = run[kind]
+        rollout = sample_transitions(train.P, res["policy"], train.p0, demos.states.shape[0], np.random.default_rng(99))
+        log_pi = np.log(np.maximum(res["policy"], 1e-300))
+        sides = {}
+        for side, batch in (("expert", demos), ("policy", rollout)):
+            t = np.broadcast_to(np.arange(horizon), batch.states.shape).ravel()
+            s, a, s2 = (x.ravel() for x in batch)
+            done = (t == horizon - 1).astype(float)
+            sides[side] = dict(s=s, a=a, s2=s2, done=done, log_pi=log_pi[t, s, a])
+            out[f"{kind}_{side}_s"], out[f"{kind}_{side}_a"], out[f"{kind}_{side}_s2"] = s, a, s2
+            out[f"{kind}_{side}_done"], out[f"{kind}_{side}_log_pi"] = done, log_pi[t, s, a]
+        disc = res["discriminator"]
+        with torch.no_grad():
+            if kind == "gail":
+                table = disc.table()
+                out["gail_table"] = table.numpy()
+                logits = {k: table[torch.as_tensor(v["s"]), torch.as_tensor(v["a"])] for k, v in sides.items()}
+                out["gail_reward_ours"] = ns["policy_reward"](logits["policy"], "gail").numpy()
+            else:
+                g, h = disc.g(), disc.h
+                out["airl_g"], out["airl_h"] = g.numpy(), h.numpy()
+                logits = {k: ns["airl_logits"](g[v["s"]], h[v["s"]], h[v["s2"]], torch.as_tensor(v["log_pi"]),
+                                               BUDGET["AIRL_GAMMA"], torch.as_tensor(v["done"])) for k, v in sides.items()}
+            for side in sides:
+                out[f"{kind}_{side}_logits_ours"] = logits[side].numpy()
+            out[f"{kind}_loss_ours"] = float(ns["discriminator_loss"](logits["expert"], logits["policy"]))
+    np.savez(path, **out)
+    return out
+
+
+def imitation_worker(path_in: str, path_out: str) -> None:
+    """Runs under the bench venv: imitation's reward nets, AIRL logits and discriminator loss on our inputs."""
+    import gymnasium as gym
+    import imitation
+    import torch as th
+    import torch.nn.functional as F
+    from imitation.algorithms.adversarial.airl import AIRL
+    from imitation.algorithms.adversarial.gail import RewardNetFromDiscriminatorLogit
+    from imitation.rewards.reward_nets import RewardNet, ShapedRewardNet
+
+    d = dict(np.load(path_in))
+    obs_space, act_space = gym.spaces.Discrete(int(d["n_states"])), gym.spaces.Discrete(int(d["n_actions"]))
+
+    class Table(RewardNet):
+        """A reward r(s, a) read from a table (states and actions as integer tensors)."""
+
+        def __init__(self, table):
+            super().__init__(obs_space, act_space)
+            self.table = th.as_tensor(table)
+
+        def forward(self, state, action, next_state, done):
+            return self.table[state.long(), action.long()]
+
+    g = d["airl_g"][:, None].repeat(int(d["n_actions"]), axis=1)
+    h = th.as_tensor(d["airl_h"])
+    shaped = ShapedRewardNet(Table(g), lambda s: h[s.long()], float(d["gamma"]))
+
+    class Stand:  # what AIRL.logits_expert_is_high reads of its trainer
+        _reward_net = shaped
+
+    report = {"imitation_version": imitation.__version__}
+    gail_net = RewardNetFromDiscriminatorLogit(Table(d["gail_table"]))
+    for kind in ("gail", "airl"):
+        logits = {}
+        for side in ("expert", "policy"):
+            s, a, s2, done = (th.as_tensor(d[f"{kind}_{side}_{k}"]) for k in ("s", "a", "s2", "done"))
+            if kind == "gail":
+                logits[side] = gail_net.base(s, a, s2, done)
+            else:
+                logits[side] = AIRL.logits_expert_is_high(Stand(), s, a, s2, done, th.as_tensor(d[f"airl_{side}_log_pi"]))
+            if kind == "airl":  # (GAIL's logits are the table itself on both sides: nothing to compare)
+                report[f"{kind}_{side}_logits_max_abs_diff"] = float((logits[side] - th.as_tensor(d[f"{kind}_{side}_logits_ours"])).abs().max())
+        pooled = th.cat([logits["expert"], logits["policy"]])
+        labels = th.cat([th.ones_like(logits["expert"]), th.zeros_like(logits["policy"])])
+        theirs = float(F.binary_cross_entropy_with_logits(pooled, labels))   # imitation's train_disc loss
+        # with equal batch sizes the pooled mean is half our sum of the two sides' means
+        report[f"{kind}_loss_theirs_pooled_mean"] = theirs
+        report[f"{kind}_loss_ours"] = float(d[f"{kind}_loss_ours"])
+        report[f"{kind}_loss_ratio_ours_over_theirs"] = float(d[f"{kind}_loss_ours"]) / theirs
+        if kind == "gail":
+            s, a, s2, done = (th.as_tensor(d[f"gail_policy_{k}"]) for k in ("s", "a", "s2", "done"))
+            report["gail_reward_max_abs_diff"] = float((gail_net(s, a, s2, done) - th.as_tensor(d["gail_reward_ours"])).abs().max())
+    Path(path_out).write_text(json.dumps(report))
+
+
+def run_imitation(ns: dict, worlds: dict, run: dict, bench_python: str) -> dict | str:
+    if not Path(bench_python).exists():
+        return (f"not run: no bench venv at {bench_python} (python3.11 -m venv .venv-bench && "
+                ".venv-bench/bin/pip install -r bench/requirements-hw2.txt)")
+    with tempfile.TemporaryDirectory() as tmp:
+        imitation_inputs(ns, worlds, run, Path(tmp) / "in.npz")
+        proc = subprocess.run([bench_python, __file__, "--imitation-worker", str(Path(tmp) / "in.npz"),
+                               str(Path(tmp) / "out.json")], capture_output=True, text=True, cwd=REPO)
+        if proc.returncode:
+            return "the imitation worker failed: " + (proc.stderr.strip().splitlines() or ["?"])[-1]
+        return json.loads((Path(tmp) / "out.json").read_text())
+
+
+def notebook_budgets() -> dict:
+    """Wall time of the solution notebook executed with FAST = True and with FAST = False."""
+    import nbformat
+    from nbclient import NotebookClient
+
+    times = {}
+    for fast in (True, False):
+        nb = nbformat.read(NOTEBOOK, as_version=4)
+        at = next(i for i, c in enumerate(nb.cells) if "parameters" in c.metadata.get("tags", []))
+        nb.cells.insert(at + 1, nbformat.v4.new_code_cell(f"FAST = {fast}"))
+        start = time.perf_counter()
+        NotebookClient(nb, timeout=1800, kernel_name="python3", resources={"metadata": {"path": str(REPO)}}).execute()
+        times["fast_s" if fast else "full_s"] = round(time.perf_counter() - start, 1)
+    return times
+
+
+def summary(seeds: dict) -> dict:
+    from rlcourse.adversarial import LEARNERS, WORLD_NAMES
+
+    return {learner: {world: {"mean": float(np.mean([s["scores"][learner][world] for s in seeds.values()])),
+                              "std": float(np.std([s["scores"][learner][world] for s in seeds.values()]))}
+                      for world in WORLD_NAMES} for learner in LEARNERS}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=BUDGET["N_SEEDS"])
+    parser.add_argument("--notebook", action="store_true", help="also time the solution notebook (FAST and full)")
+    parser.add_argument("--bench-python", default=str(REPO / ".venv-bench" / "bin" / "python"))
+    parser.add_argument("--imitation-worker", nargs=2, metavar=("IN", "OUT"))
+    args = parser.parse_args()
+    if args.imitation_worker:
+        imitation_worker(*args.imitation_worker)
+        return
+    import torch
+
+    from rlcourse.adversarial import LEARNERS, WORLD_NAMES, transfer_worlds
+
+    torch.set_num_threads(1)
+    ns = solution_namespace()
+    worlds = transfer_worlds(size=BUDGET["GRID_SIZE"], horizon=BUDGET["HORIZON"], seed=0)
+    seeds, first = {}, None
+    for seed in range(args.seeds):
+        seeds[str(seed)], run = run_seed(ns, worlds, seed)
+        first = first or run
+        print(f"seed {seed}: {seeds[str(seed)]['wall_s']} s", flush=True)
+    record = {"meta": meta(["rlcourse/adversarial.py", "solutions/hw2b_adversarial", "bench/bench_hw2b_adversarial.py"]),
+              "settings": BUDGET, "worlds": list(WORLD_NAMES), "learners": list(LEARNERS),
+              "score": "(J(pi) - J(uniform)) / (J(expert re-planned in that world) - J(uniform)), exact expectations",
+              "seeds": seeds, "summary": summary(seeds),
+              "imitation_check": run_imitation(ns, worlds, first, args.bench_python)}
+    if args.notebook:
+        record["notebook"] = notebook_budgets()
+    elif RESULTS.exists():
+        old = json.loads(RESULTS.read_text())
+        if "notebook" in old:
+            record["notebook"] = old["notebook"]
+    RESULTS.write_text(json.dumps(record, indent=1) + "\n")
+    print(f"{'':18}" + "".join(f"{w:>16}" for w in WORLD_NAMES))
+    for learner, row in record["summary"].items():
+        print(f"{learner:18}" + "".join(f"{row[w]['mean']:>10.2f} ± {row[w]['std']:.2f}" for w in WORLD_NAMES))
+    print("imitation check:", json.dumps(record["imitation_check"], indent=1))
+    print("notebook:", record.get("notebook"))
+
+
+if __name__ == "__main__":
+    main()
