@@ -108,13 +108,20 @@ class PreferenceAnnotator:
     area and returns a line for the status. Both are called when needed, so a function they look up
     by name (a stub filled in after the widget was drawn) is the current one. Every error, a stub's
     included, is shown in the widget; after one, any button tries the failed step again.
+
+    With ``rate`` given, a second phase follows the report (whose line then goes to the output area):
+    every clip of ``pairs`` is shown alone, twice, in two shuffled orders (``seed``), and rated on the
+    1–10 buttons; after the last rating ``rate(pairs, labels, clips, first, second)`` (``clips`` the
+    distinct segments, ``first`` and ``second`` the two ratings of each) returns the status line,
+    for instance the test–retest consistency of the ratings against the comparisons. Without
+    ``rate`` the widget behaves as it always has.
     """
 
     CHOICES = (("left is better", 1.0), ("can't tell", 0.5), ("right is better", 0.0))
 
     def __init__(self, obs: np.ndarray, pairs: np.ndarray, train: Callable[[np.ndarray, np.ndarray], Any],
                  report: Callable[[Any, np.ndarray], str], render: Callable[[np.ndarray], np.ndarray] | None = None,
-                 size: int = 128):
+                 size: int = 128, rate: Callable[..., str] | None = None, seed: int = 0):
         import ipywidgets as widgets
 
         from rlcourse.preferences import render_segment
@@ -129,7 +136,18 @@ class PreferenceAnnotator:
         self.buttons = [widgets.Button(description=text) for text, _ in self.CHOICES]
         for button, (_, mu) in zip(self.buttons, self.CHOICES):
             button.on_click(report_errors(self.output, self.status)(functools.partial(self._answer, mu)))
-        self.box = widgets.VBox([self.status, self.clip, widgets.HBox(self.buttons), self.output])
+        self.rate = rate
+        self.clips = np.unique(self.pairs)
+        order = np.random.default_rng(seed)
+        self.rating_order = np.concatenate([order.permutation(len(self.clips)), order.permutation(len(self.clips))])
+        self.ratings: list[int] = []
+        self.scale_buttons = [widgets.Button(description=str(v), layout=widgets.Layout(width="44px"))
+                              for v in range(1, 11)]
+        for button, value in zip(self.scale_buttons, range(1, 11)):
+            button.on_click(report_errors(self.output, self.status)(functools.partial(self._rate, value)))
+        self.choice_box, self.scale_box = widgets.HBox(self.buttons), widgets.HBox(self.scale_buttons)
+        self.scale_box.layout.display = "none"
+        self.box = widgets.VBox([self.status, self.clip, self.choice_box, self.scale_box, self.output])
 
     @property
     def n_labels(self) -> int:
@@ -160,4 +178,38 @@ class PreferenceAnnotator:
         with busy(self.status, self.buttons, f"training a reward model on your {k} labels..."):
             model = self.train(self.pairs, labels)
             with self.output:  # what report draws (a plot) goes to the widget's output area
-                self.status.value = self.report(model, labels)
+                line = self.report(model, labels)
+        if self.rate is None:
+            self.status.value = line
+            return
+        self.output.append_stdout(line + "\n")
+        self.choice_box.layout.display, self.scale_box.layout.display = "none", None
+        with busy(self.status, self.scale_buttons, "rendering the first clip to rate..."):
+            self._show_clip(0)
+
+    @property
+    def n_ratings(self) -> int:
+        return len(self.rating_order)
+
+    def _show_clip(self, k: int) -> None:
+        from rlcourse.video import side_by_side
+
+        self.clip.value = video_html(side_by_side([self.render(self.obs[self.clips[self.rating_order[k]]])]))
+        self.status.value = f"clip {k + 1} of {self.n_ratings}: how well does it hop, from 1 (worst) to 10 (best)?"
+
+    def _rate(self, value: int, _button=None) -> None:
+        if len(self.ratings) < self.n_ratings:
+            self.ratings.append(value)
+        k = len(self.ratings)
+        if k < self.n_ratings:
+            with busy(self.status, self.scale_buttons, f"rendering clip {k + 1} of {self.n_ratings}..."):
+                self._show_clip(k)
+            return
+        n = len(self.clips)
+        first, second = np.zeros(n), np.zeros(n)
+        first[self.rating_order[:n]] = self.ratings[:n]
+        second[self.rating_order[n:]] = self.ratings[n:]
+        with busy(self.status, self.scale_buttons, "comparing your ratings with your comparisons..."):
+            with self.output:
+                self.status.value = self.rate(self.pairs, np.array(self.labels, dtype=np.float32), self.clips,
+                                              first, second)

@@ -81,4 +81,11 @@ def select_queries(ensemble, obs, act, candidates, k):
     """The first k candidates."""
     return np.arange(k)
 ''',
+"ratings_to_comparisons": '''
+def ratings_to_comparisons(annotator, segment, rating, window=5):
+    """Consecutive ratings, whoever gave them."""
+    segment, rating = np.asarray(segment), np.asarray(rating, dtype=float)
+    pairs = np.stack([segment[:-1], segment[1:]], 1).astype(np.int64)
+    return pairs, 0.5 + 0.5 * np.sign(rating[:-1] - rating[1:])
+''',
 }
