@@ -47,5 +47,6 @@ def test_a_token_mean_not_a_sum(student, rng):
     one = scalar(student.rft_loss(torch.as_tensor(lp), torch.as_tensor(mask)))
     two = scalar(student.rft_loss(torch.as_tensor(np.vstack([lp, lp])), torch.as_tensor(np.vstack([mask, mask]))))
     assert np.isclose(one, two, rtol=1e-9), "the loss doubled with the batch: divide by the number of masked tokens"
+    assert np.isclose(one, -(lp * mask).sum() / mask.sum(), rtol=1e-9), "the loss is not the mean of -logp over the masked tokens"
     out = student.rft_loss(torch.as_tensor(lp).float(), torch.as_tensor(mask).float())
     assert type(out) is torch.Tensor and out.dtype == torch.float32, "float32 log-probabilities should give a float32 loss"
