@@ -55,6 +55,7 @@ def test_edge_cases_of_the_format(student):
     items = [(0, 0, [DIGIT0, EOS]), (0, 0, [DIGIT0, DIGIT0, EOS]), (2, 3, [DIGIT0, DIGIT0 + 5, EOS]),
              (999, 999, number_tokens(1998) + [EOS]), (999, 999, number_tokens(1998)),
              (500, 500, number_tokens(1000) + [EOS]), (500, 500, [DIGIT0] + number_tokens(1000) + [EOS]),
+             (500, 500, number_tokens(10000) + [EOS]), (999, 1, number_tokens(10000) + [EOS]),
              (12, 34, [EOS]), (12, 34, number_tokens(46) + [SEMI, EOS]), (12, 34, number_tokens(46) + [EOS, SEMI, 5]),
              (12, 34, number_tokens(46) + [0, EOS]), (12, 34, number_tokens(46) + [13, EOS]),
              (1, 2, number_tokens(3) + [EOS, EOS]), (10, 5, number_tokens(15) + [EOS])]
