@@ -3,7 +3,7 @@ checker, with pass@1 and pass@k (k up to 64) against the samples drawn, three se
 
     python bench/bench_hw7_verifier_rl.py                 # the solution notebook's full budget, all its seeds
     python bench/bench_hw7_verifier_rl.py --fast          # the same at FAST = True (a smoke run: numbers meaningless)
-    python bench/bench_hw7_verifier_rl.py --budgets       # also time the notebook run by a Jupyter kernel, FAST and full
+    python bench/bench_hw7_verifier_rl.py --budgets --mutants   # also: FAST under a kernel, one grading, the mutants
 
 Every number is the solution notebook's own: its code cells (setup, your-function stubs with the reference
 solutions, experiments) are executed in order in this process with ``FAST`` set, so the settings are the
@@ -11,8 +11,9 @@ notebook's settings cell (recorded in ``budget``) and seed ``s`` here is seed ``
 seed the file holds pass@k for every k in ``KS``, the format rate and the mean answer length; per method and seed
 the pass@k curve against the samples drawn, the fraction of all-equal groups and the answer length over training;
 and the sharpening verdict of the notebook (pass@1 and pass@64 minus SFT's, problems lost and gained). The wall
-time of the whole execution is ``exec_seconds``; ``--budgets`` adds the notebook's wall time under a real kernel
-(``autograder.authoring.nbrun``), FAST and full, as the course's budgets are stated.
+time of the whole execution is ``exec_seconds`` (the full budget: every code cell, in order, in one process);
+``--budgets`` adds the FAST notebook's wall time under a real kernel (``autograder.authoring.nbrun``) and the time
+to grade the complete sample submission; ``--mutants`` records the mutation report.
 """
 from __future__ import annotations
 
@@ -91,10 +92,50 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def budgets(full_kernel: bool = False) -> dict:
+    """The notebook under a Jupyter kernel at FAST = True (and at the full budget with ``full_kernel``), and one
+    grading of the complete sample submission, each timed with the load beside it."""
+    import subprocess
+    import tempfile
+
+    from autograder.authoring.nbrun import run_notebook
+
+    out = {}
+    for name, fast in (("notebook_fast", True),) + ((("notebook_full", False),) if full_kernel else ()):
+        with tempfile.TemporaryDirectory() as tmp:
+            report = run_notebook(NOTEBOOK, {"FAST": fast}, timeout=3600, cwd=tmp)
+        assert report.ok, report
+        out[name] = {"seconds": round(report.seconds, 1), "load": meta()["load"]}
+    sample = REPO / "autograder" / "samples" / "hw7_verifier_rl" / "complete.ipynb"
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "autograder", "grade", "hw7_verifier_rl", str(sample), "--out", tmp],
+                              cwd=REPO, capture_output=True, text=True)
+        seconds = time.perf_counter() - t0
+    assert done.returncode == 0, done.stderr
+    out["grade_complete"] = {"seconds": round(seconds, 1), "load": meta()["load"],
+                             "summary": done.stdout.strip().splitlines()[0]}
+    return out
+
+
+def mutants() -> dict:
+    """``python -m autograder mutants hw7_verifier_rl``, run now: per stub, mutants made, equivalent, killed."""
+    import subprocess
+
+    subprocess.run([sys.executable, "-m", "autograder", "mutants", "hw7_verifier_rl"], cwd=REPO, check=True,
+                   capture_output=True)
+    report = json.loads((REPO / "build" / "mutants" / "hw7_verifier_rl" / "report.json").read_text())
+    return {stub: {k: row[k] for k in ("made", "equivalent", "killed_by_suite", "killed_by_check", "survivors",
+                                       "suite_kill_rate")} for stub, row in report.items()}
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--fast", action="store_true", help="FAST = True (a smoke run; written to a .fast.json)")
-    parser.add_argument("--budgets", action="store_true", help="also time the notebook under a Jupyter kernel")
+    parser.add_argument("--budgets", action="store_true",
+                        help="also time the notebook under a Jupyter kernel at FAST = True, and one grading")
+    parser.add_argument("--full-kernel", action="store_true", help="with --budgets: the full notebook under a kernel too")
+    parser.add_argument("--mutants", action="store_true", help="also run the mutation report and record it")
     args = parser.parse_args(argv)
     ns, seconds = execute(args.fast)
     result = {"meta": meta(["rlcourse", "solutions/hw7_verifier_rl", "datasets/hw7"]),
@@ -102,13 +143,9 @@ def main(argv: list[str] | None = None) -> None:
               "budget": {k: ns[k] for k in SETTINGS}, "base": dict(ns["base"].metadata),
               "exec_seconds": round(seconds, 1), **summarise(ns)}
     if args.budgets:
-        from autograder.authoring.nbrun import run_notebook
-
-        result["notebook_seconds"] = {}
-        for name, fast in (("fast", True), ("full", False)):
-            report = run_notebook(NOTEBOOK, {"FAST": fast}, timeout=3600, cwd=RESULTS)
-            assert report.ok, report
-            result["notebook_seconds"][name] = {"seconds": round(report.seconds, 1), "meta": meta()}
+        result["budgets"] = budgets(full_kernel=args.full_kernel)
+    if args.mutants:
+        result["mutants"] = mutants()
     out = RESULTS / ("hw7_verifier_rl.fast.json" if args.fast else "hw7_verifier_rl.json")
     out.write_text(json.dumps(result, indent=1) + "\n")
     print(table(result))
