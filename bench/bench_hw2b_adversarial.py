@@ -5,8 +5,9 @@ check of the three stubs against the `imitation` library's GAIL and AIRL code on
 
 1. **Transfer table.** For each seed, ``rlcourse.adversarial.transfer_experiment`` with hw2b's full budgets (its
    parameters cell with ``FAST = False``, repeated in ``BUDGET`` below and checked against the notebook by
-   ``tests/hw2b_adversarial``) and the reference solutions of the three stubs (the solution notebook's setup and
-   stub cells, executed here): demonstrations in the training world, BC, MaxEnt IRL, GAIL and AIRL fitted on
+   ``tests/hw2b_adversarial``) and the reference solutions of the five stubs (the solution notebook's setup and
+   stub cells, executed here: the planner and forward pass every learner plans and is scored with, the
+   discriminator loss, AIRL's logits, the policy reward): demonstrations in the training world, BC, MaxEnt IRL, GAIL and AIRL fitted on
    them, then in each of the four worlds (``WORLD_NAMES``, fixed in ``transfer_worlds`` before any learner was
    run) the normalised true return of each carried-over policy and of each policy retrained from scratch on a
    recovered reward. Seeds 0..4 are the notebook's seeds, so the notebook's table is seed for seed this one.
@@ -45,7 +46,7 @@ from bench.run_record import meta  # noqa: E402
 NOTEBOOK = REPO / "solutions" / "hw2b_adversarial" / "hw2b_adversarial.ipynb"
 RESULTS = REPO / "bench" / "results" / "hw2b_adversarial.json"
 # hw2b's full budgets (its parameters cell with FAST = False).
-BUDGET = dict(GRID_SIZE=10, HORIZON=25, N_DEMOS=100, N_ITERS=150, N_SEEDS=5, AIRL_GAMMA=0.9, GAIL_ENTROPY=0.0)
+BUDGET = dict(GRID_SIZE=10, HORIZON=25, N_DEMOS=100, N_ITERS=150, N_SEEDS=5, AIRL_GAMMA=0.9)
 
 
 def solution_namespace(path: Path = NOTEBOOK) -> dict:
@@ -67,15 +68,15 @@ def run_seed(ns: dict, worlds: dict, seed: int) -> tuple[dict, dict]:
 
     start = time.perf_counter()
     run = ns["transfer_experiment"](worlds, seed, BUDGET["N_DEMOS"], ns["discriminator_loss"], ns["policy_reward"],
-                                    ns["airl_logits"], n_iters=BUDGET["N_ITERS"], airl_gamma=BUDGET["AIRL_GAMMA"],
-                                    gail_entropy=BUDGET["GAIL_ENTROPY"])
+                                    ns["airl_logits"], ns["soft_policy"], ns["state_distributions"],
+                                    n_iters=BUDGET["N_ITERS"], airl_gamma=BUDGET["AIRL_GAMMA"])
     row = {"scores": run["scores"], "wall_s": round(time.perf_counter() - start, 2),
            "maxent_weights": run["maxent_weights"].tolist(),
            "final_training_score": {k: float(run[k]["history"]["score"][-1]) for k in ("gail", "airl")},
            "final_discriminator_accuracy": {k: [float(run[k]["history"]["expert_accuracy"][-1]),
                                                 float(run[k]["history"]["policy_accuracy"][-1])] for k in ("gail", "airl")},
-           "own_policy_training_world": {k: normalised_return(worlds["original"], run[k]["policy"])
-                                         for k in ("gail", "airl")}}
+           "own_policy_training_world": {k: normalised_return(worlds["original"], run[k]["policy"],
+                                                              ns["state_distributions"]) for k in ("gail", "airl")}}
     return row, run
 
 

@@ -7,17 +7,19 @@ worlds with the *same* states, features and true reward but other dynamics or st
 the ground three times as slippery (the slip probability raised from 0.1 to 0.4), and a new start region
 beyond the wall.
 
-Everything here is given to the student: the samplers, an exact planner for a reward of state and action,
-the occupancy measure, the behaviour-cloning and MaxEnt baselines, the two discriminators and the
-training loop. The loop takes the three functions the student writes (the discriminator's loss, AIRL's
-logits and the policy's reward) as arguments.
+Given to the student: the worlds, the sampler, the behaviour-cloning and MaxEnt baselines, the two
+discriminators, the training loop and the transfer experiment. Planning and evaluation go through two
+functions the student writes in hw2b, passed in as arguments: ``plan(P, reward, T)``, the soft-optimal
+policy of a ``(T, S, A)`` reward (hw2's backward pass, generalised to rewards of state and action), and
+``visits(P, policy, p0)``, the per-step state distributions ``(T, S)`` (hw2's forward pass, kept per step).
+Nothing here plans or computes visitation itself, so this module answers none of hw2's stubs; the loop
+also takes the student's discriminator loss, AIRL logits and policy reward.
 
 Conventions follow :mod:`rlcourse.gridworld`: a trajectory visits ``s_0 .. s_{T-1}``, takes an action at
 each, and here also records where each action led, ``s_{t+1}`` (for ``t = T - 1`` a last draw from the
 dynamics), so that transitions ``(s_t, a_t, s_{t+1})`` are ``(N, T)`` arrays ``states, actions,
-next_states``; ``done`` marks the last one. Policies are time-dependent, ``(T, S, A)``. The learner's
-policy optimiser is exact: policy evaluation through the known dynamics and a mirror-descent step
-(``log pi <- log pi + eta * advantage``), the tabular counterpart of TRPO's natural-gradient step.
+next_states``; ``done`` marks the last one. Policies are time-dependent, ``(T, S, A)``; the policy step
+of the adversarial learners is exact planning on the current reward through the known dynamics.
 """
 from __future__ import annotations
 
@@ -122,50 +124,26 @@ def _flat(P: np.ndarray) -> csr_array:
     return csr_array(np.asarray(P, dtype=float).reshape(-1, P.shape[-1]))
 
 
-def soft_optimal_policy(P: np.ndarray, reward: np.ndarray, horizon: int, temperature: float = 1.0) -> np.ndarray:
-    """The policy maximising ``E[sum_t reward_t(s_t, a_t)] + temperature * (causal entropy)`` over ``T`` steps.
-
-    ``reward`` is ``(S,)``, ``(S, A)`` or time-dependent ``(T, S, A)``. Soft backward recursion with
-    ``V_T = 0``: ``Q_t = reward_t + P V_{t+1}``, ``V_t = temperature * logsumexp(Q_t / temperature)``;
-    returns ``pi_t = exp((Q_t - V_t) / temperature)``, shape ``(T, S, A)``.
-    """
-    n_states, n_actions = P.shape[:2]
-    reward = np.broadcast_to(np.asarray(reward, dtype=float).reshape(
-        (-1, n_states, n_actions) if np.ndim(reward) == 3 else (n_states, -1)), (horizon, n_states, n_actions))
-    P_flat = _flat(P)
-    policy = np.empty((horizon, n_states, n_actions))
-    v_next = np.zeros(n_states)
-    for t in reversed(range(horizon)):
-        q = (reward[t] + (P_flat @ v_next).reshape(n_states, n_actions)) / temperature
-        q_max = q.max(axis=1, keepdims=True)
-        log_z = q_max + np.log(np.exp(q - q_max).sum(axis=1, keepdims=True))
-        policy[t] = np.exp(q - log_z)
-        v_next = temperature * log_z[:, 0]
-    return policy
+def as_time_table(reward: np.ndarray, horizon: int, n_states: int, n_actions: int) -> np.ndarray:
+    """A reward of shape ``(S,)``, ``(S, A)`` or ``(T, S, A)`` as a ``(T, S, A)`` array."""
+    reward = np.asarray(reward, dtype=float)
+    if reward.ndim == 1:
+        reward = reward[:, None]
+    return np.broadcast_to(reward, (horizon, n_states, n_actions)).copy()
 
 
-def occupancy(P: np.ndarray, policy: np.ndarray, p0: np.ndarray) -> np.ndarray:
-    """``d[t, s] = Pr(s_t = s)`` for ``t < T`` under a ``(T, S, A)`` policy (forward pass), shape ``(T, S)``."""
-    horizon, n_states, _ = policy.shape
-    P_T = _flat(P).T
-    d = np.empty((horizon, n_states))
-    d[0] = p0
-    for t in range(horizon - 1):
-        d[t + 1] = P_T @ (d[t][:, None] * policy[t]).ravel()
-    return d
+def true_return(mdp: GridMDP, policy: np.ndarray, visits: Callable) -> float:
+    """Exact expected true return ``sum_t E[r(s_t)]`` of a ``(T, S, A)`` policy in ``mdp``, from
+    ``visits(P, policy, p0)``, the per-step state distributions ``(T, S)`` (the student's forward pass)."""
+    return float((np.asarray(visits(mdp.P, policy, mdp.p0)) @ mdp.true_reward).sum())
 
 
-def true_return(mdp: GridMDP, policy: np.ndarray) -> float:
-    """Exact expected true return ``sum_t E[r(s_t)]`` of a ``(T, S, A)`` policy in ``mdp``."""
-    return float((occupancy(mdp.P, policy, mdp.p0) @ mdp.true_reward).sum())
-
-
-def normalised_return(mdp: GridMDP, policy: np.ndarray) -> float:
+def normalised_return(mdp: GridMDP, policy: np.ndarray, visits: Callable) -> float:
     """``(J(pi) - J(uniform)) / (J(expert) - J(uniform))`` in ``mdp``: 1 is the expert planned in that
-    world, 0 the uniformly random policy."""
+    world (Boltzmann-rational in its optimal Q-values, as the demonstrators), 0 the uniformly random policy."""
     uniform = np.full((mdp.horizon, mdp.n_states, mdp.n_actions), 1.0 / mdp.n_actions)
-    j_uniform = true_return(mdp, uniform)
-    return (true_return(mdp, policy) - j_uniform) / (true_return(mdp, mdp.expert_policy()) - j_uniform)
+    j_uniform = true_return(mdp, uniform, visits)
+    return (true_return(mdp, policy, visits) - j_uniform) / (true_return(mdp, mdp.expert_policy(), visits) - j_uniform)
 
 
 def behaviour_cloning(demos: Transitions, n_states: int, n_actions: int, horizon: int,
@@ -177,16 +155,19 @@ def behaviour_cloning(demos: Transitions, n_states: int, n_actions: int, horizon
     return np.broadcast_to(counts / counts.sum(axis=1, keepdims=True), (horizon, n_states, n_actions)).copy()
 
 
-def fit_maxent_weights(mdp: GridMDP, demos: Transitions, n_iters: int = 300, lr: float = 0.05) -> np.ndarray:
+def fit_maxent_weights(mdp: GridMDP, demos: Transitions, plan: Callable, visits: Callable, n_iters: int = 300,
+                       lr: float = 0.05) -> np.ndarray:
     """Linear MaxEnt IRL weights ``w`` (``r(s) = phi(s) . w``) by Adam on the causal log-likelihood, whose
-    gradient is the expert's feature counts minus the soft-optimal policy's (hw2); from ``w = 0``."""
+    gradient is the expert's feature counts minus those of ``plan``'s soft-optimal policy (hw2); from
+    ``w = 0``, ``n_iters`` steps of size ``lr``."""
     phi = np.asarray(mdp.features, dtype=float)
+    shape = (mdp.horizon, mdp.n_states, mdp.n_actions)
     mu_expert = phi[demos.states].sum(axis=1).mean(axis=0)
     w = torch.zeros(phi.shape[1], dtype=torch.float64, requires_grad=True)
     opt = torch.optim.Adam([w], lr=lr)
     for _ in range(n_iters):
-        policy = soft_optimal_policy(mdp.P, phi @ w.detach().numpy(), mdp.horizon)
-        mu_model = phi.T @ occupancy(mdp.P, policy, mdp.p0).sum(axis=0)
+        policy = plan(mdp.P, as_time_table(phi @ w.detach().numpy(), *shape), mdp.horizon)
+        mu_model = phi.T @ np.asarray(visits(mdp.P, policy, mdp.p0)).sum(axis=0)
         opt.zero_grad()
         w.grad = torch.as_tensor(mu_model - mu_expert)      # minus the log-likelihood's gradient
         opt.step()
@@ -240,39 +221,25 @@ def airl_expected_logits(disc: AirlDiscriminator, P: np.ndarray, log_pi: np.ndar
     return airl_logits(disc.g()[None, :, None], h[None, :, None], h_next[None], torch.as_tensor(log_pi), gamma, done)
 
 
-def mirror_descent_step(P: np.ndarray, policy: np.ndarray, reward: np.ndarray, step: float,
-                        entropy: float = 0.0) -> np.ndarray:
-    """One exact natural-gradient step of a ``(T, S, A)`` policy on a fixed ``(T, S, A)`` reward (plus
-    ``entropy`` times the causal entropy): evaluate ``Q_t`` and ``V_t`` of the current policy through
-    the known dynamics, then ``log pi_t <- log pi_t + step * (Q_t - V_t)``, renormalised."""
-    horizon, n_states, n_actions = policy.shape
-    P_flat = _flat(P)
-    log_pi = np.log(np.maximum(policy, 1e-300))
-    new = np.empty_like(policy)
-    v_next = np.zeros(n_states)
-    for t in reversed(range(horizon)):
-        q = reward[t] - entropy * log_pi[t] + (P_flat @ v_next).reshape(n_states, n_actions)
-        v = (policy[t] * q).sum(axis=1)
-        z = log_pi[t] + step * (q - v[:, None])
-        z -= z.max(axis=1, keepdims=True)
-        new[t] = np.exp(z) / np.exp(z).sum(axis=1, keepdims=True)
-        v_next = v
-    return new
-
-
 def train_adversarial(mdp: GridMDP, demos: Transitions, kind: str, discriminator_loss: Callable,
-                      policy_reward: Callable, airl_logits: Callable | None = None, n_iters: int = 150,
-                      n_policy: int = 200, disc_steps: int = 5, lr: float = 0.05, policy_step: float = 0.5,
-                      gamma: float = 1.0, entropy: float = 1.0, seed: int = 0) -> dict:
+                      policy_reward: Callable, airl_logits: Callable | None, plan: Callable, visits: Callable,
+                      n_iters: int = 150, n_policy: int = 200, disc_steps: int = 5, lr: float = 0.05,
+                      policy_step: float = 0.5, gamma: float = 0.9, seed: int = 0) -> dict:
     """GAIL (``kind="gail"``) or AIRL (``kind="airl"``) on a world with known dynamics.
 
-    Each iteration: sample ``n_policy`` trajectories of the current policy; take ``disc_steps`` Adam
-    steps (``lr``) on ``discriminator_loss(expert_logits, policy_logits)``; set the policy's reward from
-    the discriminator with ``policy_reward(logits, kind)`` and take one :func:`mirror_descent_step`.
-    GAIL's reward ``r(s, a)`` gets an entropy bonus of weight ``entropy`` (its causal-entropy term);
-    AIRL's reward ``f - log pi`` carries its own. Returns the discriminator, the final policy and a
-    history (``loss``, ``expert_accuracy``, ``policy_accuracy`` of the discriminator, ``score``: the
-    normalised true return in ``mdp``, one entry per iteration).
+    Each iteration: sample ``n_policy`` trajectories of the current policy; take ``disc_steps`` Adam steps
+    (``lr``) on ``discriminator_loss(expert_logits, policy_logits)``; then the policy step, through
+    ``plan(P, reward, T)``, the soft-optimal policy of a ``(T, S, A)`` reward (the student's backward pass):
+
+    - GAIL: the reward ``r_k(s, a) = policy_reward(l(s, a), "gail")`` of this round is added, times
+      ``policy_step``, to a running sum, and the policy is ``plan`` of the sum (follow the regularised leader:
+      the policy answers every discriminator so far, not only the last);
+    - AIRL: the reward ``policy_reward(l, "airl") = f - log pi`` already holds the entropy term that ``plan``
+      adds itself, so ``plan`` gets ``f`` (expected over ``s'``), the reward plus ``log pi``.
+
+    Returns the discriminator, the final policy, GAIL's summed reward (``"reward_sum"``) and a history
+    (``loss``, ``expert_accuracy``, ``policy_accuracy`` of the discriminator, ``score``: the normalised true
+    return in ``mdp``, one entry per iteration).
     """
     if kind not in ("gail", "airl"):
         raise ValueError(f"kind must be 'gail' or 'airl', got {kind!r}")
@@ -282,6 +249,7 @@ def train_adversarial(mdp: GridMDP, demos: Transitions, kind: str, discriminator
     disc = GailDiscriminator(mdp.features, n_actions) if kind == "gail" else AirlDiscriminator(mdp.features)
     opt = torch.optim.Adam(disc.parameters(), lr=lr)
     policy = np.full((horizon, n_states, n_actions), 1.0 / n_actions)
+    reward_sum = np.zeros_like(policy)
     time_index = np.broadcast_to(np.arange(horizon), demos.states.shape)
     history = {"loss": [], "expert_accuracy": [], "policy_accuracy": [], "score": []}
 
@@ -309,72 +277,61 @@ def train_adversarial(mdp: GridMDP, demos: Transitions, kind: str, discriminator
         history["policy_accuracy"].append(float((policy_logits < 0).double().mean()))
         with torch.no_grad():
             if kind == "gail":
-                reward = np.broadcast_to(policy_reward(disc.table(), "gail").numpy(), policy.shape)
-                policy = mirror_descent_step(mdp.P, policy, reward, policy_step, entropy)
+                reward_sum = reward_sum + policy_step * policy_reward(disc.table(), "gail").numpy()[None]
+                policy = plan(mdp.P, reward_sum, horizon)
             else:
                 logits = airl_expected_logits(disc, mdp.P, log_pi, gamma, airl_logits)
-                reward = policy_reward(logits, "airl").numpy()
-                policy = mirror_descent_step(mdp.P, policy, reward, policy_step, 0.0)
-        history["score"].append(normalised_return(mdp, policy))
-    return {"discriminator": disc, "policy": policy, "history": {k: np.array(v) for k, v in history.items()},
-            "kind": kind, "gamma": gamma, "entropy": entropy}
+                policy = plan(mdp.P, policy_reward(logits, "airl").numpy() + log_pi, horizon)
+        policy = np.asarray(policy)
+        history["score"].append(normalised_return(mdp, policy, visits))
+    return {"discriminator": disc, "policy": policy, "reward_sum": reward_sum, "kind": kind, "gamma": gamma,
+            "scale": policy_step * n_iters, "history": {k: np.array(v) for k, v in history.items()}}
 
 
 def transfer_rewards(result: dict, policy_reward: Callable, airl_logits: Callable | None, world: GridMDP) -> dict:
-    """The rewards a trained learner hands to a new world, each ``(T, S, A)``: GAIL's ``r(s, a)`` from its
-    final discriminator; AIRL's ``g(s)`` alone, and its whole ``f = g + gamma h(s') - h(s)`` averaged over
-    the *new* world's next states (``log pi = 0``: the reward, not the discriminator)."""
+    """The rewards a trained learner hands to a new world, each ``(T, S, A)``. GAIL: its final
+    discriminator's ``r(s, a)``, scaled by ``policy_step * n_iters`` (as if every round had said the same;
+    unscaled it is too flat to plan on), and the running sum its own policy was planned on. AIRL: ``g(s)``
+    alone, and its whole ``f = g + gamma h(s') - h(s)`` averaged over the *new* world's next states."""
     disc, horizon = result["discriminator"], world.horizon
     shape = (horizon, world.n_states, world.n_actions)
     with torch.no_grad():
         if result["kind"] == "gail":
-            return {"GAIL r(s, a)": np.broadcast_to(policy_reward(disc.table(), "gail").numpy(), shape)}
+            final = policy_reward(disc.table(), "gail").numpy()
+            return {"GAIL r(s, a)": as_time_table(result["scale"] * final, *shape),
+                    "GAIL sum of r": result["reward_sum"].copy()}
         f = airl_expected_logits(disc, world.P, np.zeros(shape), result["gamma"], airl_logits).numpy()
-        return {"AIRL g(s)": np.broadcast_to(disc.g().numpy()[None, :, None], shape), "AIRL f(s, a, s')": f}
+        return {"AIRL g(s)": as_time_table(disc.g().numpy(), *shape), "AIRL f(s, a, s')": f}
 
 
-def policy_from_reward(world: GridMDP, reward: np.ndarray, entropy: float = 1.0, n_steps: int = 150,
-                       step: float = 0.5) -> np.ndarray:
-    """A policy trained from scratch on a fixed ``(T, S, A)`` reward in ``world``, with the optimiser and
-    entropy weight the learner was trained with: the soft-optimal policy (the limit of the mirror-descent
-    steps) when ``entropy > 0``; with ``entropy = 0`` (GAIL here), ``n_steps`` mirror-descent steps of
-    size ``step`` from the uniform policy, as in training."""
-    if entropy > 0:
-        return soft_optimal_policy(world.P, reward, world.horizon, temperature=entropy)
-    policy = np.full((world.horizon, world.n_states, world.n_actions), 1.0 / world.n_actions)
-    reward = np.broadcast_to(reward, policy.shape)
-    for _ in range(n_steps):
-        policy = mirror_descent_step(world.P, policy, reward, step, 0.0)
-    return policy
-
-
-LEARNERS = ("BC policy", "MaxEnt r(s)", "GAIL policy", "GAIL r(s, a)", "AIRL policy", "AIRL g(s)", "AIRL f(s, a, s')")
+LEARNERS = ("BC policy", "MaxEnt r(s)", "GAIL policy", "GAIL r(s, a)", "GAIL sum of r", "AIRL policy", "AIRL g(s)",
+            "AIRL f(s, a, s')")
 
 
 def transfer_experiment(worlds: dict[str, GridMDP], seed: int, n_demos: int, discriminator_loss: Callable,
-                        policy_reward: Callable, airl_logits: Callable, n_iters: int = 150,
-                        airl_gamma: float = 0.9, gail_entropy: float = 0.0) -> dict:
+                        policy_reward: Callable, airl_logits: Callable, plan: Callable, visits: Callable,
+                        n_iters: int = 150, airl_gamma: float = 0.9) -> dict:
     """One seed of the transfer test: ``n_demos`` expert demonstrations in ``worlds["original"]`` (drawn with
     ``seed``), BC, MaxEnt IRL, GAIL and AIRL fitted on them, then in every world the normalised true return
-    (:func:`normalised_return`) of each learner's policy carried over unchanged (``"... policy"``) and of a
-    policy trained from scratch in that world on each recovered reward (:func:`policy_from_reward`).
-    Returns ``{"scores": {learner: {world: score}}, "gail": ..., "airl": ..., "maxent_weights": ...}``."""
+    (:func:`normalised_return`) of each learner's policy carried over unchanged (``"... policy"``) and of
+    ``plan``'s policy trained from scratch in that world on each recovered reward.
+    Returns ``{"scores": {learner: {world: score}}, "gail": ..., "airl": ..., "maxent_weights": ..., "demos": ...}``."""
     train = worlds["original"]
     shape = (train.horizon, train.n_states, train.n_actions)
     demos = sample_transitions(train.P, train.expert_policy(), train.p0, n_demos, np.random.default_rng(seed))
     bc = behaviour_cloning(demos, *shape[1:], train.horizon)
-    w = fit_maxent_weights(train, demos)
-    gail = train_adversarial(train, demos, "gail", discriminator_loss, policy_reward, n_iters=n_iters,
-                             entropy=gail_entropy, seed=seed)
-    airl = train_adversarial(train, demos, "airl", discriminator_loss, policy_reward, airl_logits,
+    w = fit_maxent_weights(train, demos, plan, visits)
+    gail = train_adversarial(train, demos, "gail", discriminator_loss, policy_reward, None, plan, visits,
+                             n_iters=n_iters, seed=seed)
+    airl = train_adversarial(train, demos, "airl", discriminator_loss, policy_reward, airl_logits, plan, visits,
                              n_iters=n_iters, gamma=airl_gamma, seed=seed)
     scores = {name: {} for name in LEARNERS}
     for world_name, world in worlds.items():
-        rewards = {"MaxEnt r(s)": (np.broadcast_to((train.features @ w)[None, :, None], shape), 1.0)}
-        rewards.update({k: (r, gail_entropy) for k, r in transfer_rewards(gail, policy_reward, None, world).items()})
-        rewards.update({k: (r, 1.0) for k, r in transfer_rewards(airl, policy_reward, airl_logits, world).items()})
+        rewards = {"MaxEnt r(s)": as_time_table(train.features @ w, *shape)}
+        rewards.update(transfer_rewards(gail, policy_reward, None, world))
+        rewards.update(transfer_rewards(airl, policy_reward, airl_logits, world))
         policies = {"BC policy": bc, "GAIL policy": gail["policy"], "AIRL policy": airl["policy"]}
-        policies.update({k: policy_from_reward(world, r, entropy, n_steps=n_iters) for k, (r, entropy) in rewards.items()})
+        policies.update({k: np.asarray(plan(world.P, r, world.horizon)) for k, r in rewards.items()})
         for name in LEARNERS:
-            scores[name][world_name] = normalised_return(world, policies[name])
+            scores[name][world_name] = normalised_return(world, policies[name], visits)
     return {"scores": scores, "gail": gail, "airl": airl, "maxent_weights": w, "demos": demos}

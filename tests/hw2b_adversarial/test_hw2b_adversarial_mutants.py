@@ -22,6 +22,28 @@ LOSS = "return F.softplus(-expert_logits).mean() + F.softplus(policy_logits).mea
 
 # stub -> {mutant name: (text in the solution, replacement)}
 MUTANTS = {
+    "soft_policy": {
+        "reward of the next step": ("q = reward[t] +", "q = reward[min(t + 1, horizon - 1)] +"),
+        "reward of step 0 throughout": ("q = reward[t] +", "q = reward[0] +"),
+        "hard maximum": ("v = q_max + np.log(np.exp(q - q_max).sum(axis=1, keepdims=True))", "v = q_max"),
+        "no maximum subtracted": ("v = q_max + np.log(np.exp(q - q_max).sum(axis=1, keepdims=True))",
+                                  "v = np.log(np.exp(q).sum(axis=1, keepdims=True))"),
+        "mean over actions": ("np.exp(q - q_max).sum(axis=1, keepdims=True)", "np.exp(q - q_max).mean(axis=1, keepdims=True)"),
+        "forward in time": ("for t in reversed(range(horizon)):", "for t in range(horizon):"),
+        "V_T from the last reward": ("v_next = np.zeros(n_states)", "v_next = reward[-1].max(axis=1)"),
+        "dynamics read backwards": ("csr_array(P.reshape(n_states * n_actions, n_states))",
+                                    "csr_array(P.transpose(2, 1, 0).reshape(n_states * n_actions, n_states))"),
+    },
+    "state_distributions": {
+        "policy of the next step": ("(d[t][:, None] * policy[t]).ravel()",
+                                    "(d[t][:, None] * policy[min(t + 1, horizon - 1)]).ravel()"),
+        "uniform start": ("d[0] = p0", "d[0] = 1.0 / n_states"),
+        "one step short": ("for t in range(horizon - 1):", "for t in range(horizon - 2):"),
+        "policy ignored": ("(d[t][:, None] * policy[t]).ravel()", "(d[t][:, None] * np.full_like(policy[t], 1.0 / n_actions)).ravel()"),
+        "policy of step 0 throughout": ("(d[t][:, None] * policy[t]).ravel()", "(d[t][:, None] * policy[0]).ravel()"),
+        "renormalised by hand": ("d[t + 1] = P_T @ (d[t][:, None] * policy[t]).ravel()",
+                                 "d[t + 1] = P_T @ (d[t][:, None] * policy[t]).ravel()\n        d[t + 1] /= d[t + 1].max()"),
+    },
     "discriminator_loss": {
         "log of a sigmoid": (LOSS, "return -torch.log(torch.sigmoid(expert_logits)).mean() "
                                    "- torch.log(1 - torch.sigmoid(policy_logits)).mean()"),

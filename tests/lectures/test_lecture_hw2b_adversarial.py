@@ -18,7 +18,7 @@ from scipy.spatial.distance import jensenshannon
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from lecture_links import checks  # noqa: E402
 
-from rlcourse.adversarial import sample_transitions, soft_optimal_policy  # noqa: E402
+from rlcourse.adversarial import sample_transitions  # noqa: E402
 from rlcourse.gridworld import random_mdp  # noqa: E402
 
 
@@ -94,6 +94,17 @@ def test_airl_logit_and_the_soft_rl_problem_it_sets():
     objective = lambda z: -(np.exp(z - np.logaddexp.reduce(z)) * (f5 - (z - np.logaddexp.reduce(z)))).sum()  # noqa: E731
     z = minimize(objective, np.zeros(5), method="BFGS").x
     assert np.allclose(np.exp(z - np.logaddexp.reduce(z)), np.exp(f5) / np.exp(f5).sum(), atol=1e-5)
+
+
+def soft_optimal_policy(P, reward, horizon):
+    """Finite-horizon soft value iteration for a reward (S,) or (T, S, A), written out here."""
+    reward = np.broadcast_to(reward[:, None] if np.ndim(reward) == 1 else reward, (horizon, *P.shape[:2]))
+    v, policy = np.zeros(P.shape[0]), np.empty((horizon, *P.shape[:2]))
+    for t in reversed(range(horizon)):
+        q = reward[t] + P @ v
+        v = np.logaddexp.reduce(q, axis=1)
+        policy[t] = np.exp(q - v[:, None])
+    return policy
 
 
 def discounted_soft_vi(P, reward_sa, gamma, n_iter=3000):

@@ -1,5 +1,15 @@
 """Trivial answers to hw2b_adversarial's stubs: plausible, doing none of the work; each must earn nothing (CONTRIBUTING.md)."""
 ANSWERS = {
+"soft_policy": '''
+def soft_policy(P, reward, horizon):
+    """The uniform policy: right at the last step of an action-independent reward, and nowhere else."""
+    return np.full((horizon, P.shape[0], P.shape[1]), 1.0 / P.shape[1])
+''',
+"state_distributions": '''
+def state_distributions(P, policy, p0):
+    """The start distribution at every step."""
+    return np.tile(np.asarray(p0, dtype=float), (policy.shape[0], 1))
+''',
 "discriminator_loss": '''
 def discriminator_loss(expert_logits, policy_logits):
     """The loss of a discriminator that says 1/2 everywhere, 2 log 2, keeping the graph."""
