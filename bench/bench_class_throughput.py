@@ -25,6 +25,12 @@ test at ``test_seconds``, as before they existed), in the same grader. CPU times
 machine; every assignment's record carries the load it was measured at.
 
     python bench/bench_class_throughput.py --n 4 --ids hw0_setup hw3_preferences --per-test --record
+
+``--cache-price`` measures what drawing hidden inputs per submission costs: a batch of N identical complete
+submissions (the reference's answers computed once and cached) against N whose stub code differs by a
+comment (computed for each).
+
+    python bench/bench_class_throughput.py --cache-price --n 6 --jobs 1 --ids hw3_preferences hw5_lm_alignment --record
 """
 from __future__ import annotations
 
@@ -55,6 +61,35 @@ def make_class(folder: Path, assignment: str, n: int, kinds: dict[str, int] | No
         for _ in range(count):
             shutil.copy(samples / f"{kind}.ipynb", folder / f"student{i:03d}.ipynb")
             i += 1
+
+
+def distinct_copies(folder: Path, assignment: str, n: int) -> None:
+    """N copies of the complete sample whose stub cells differ by a comment: each meets its own hidden inputs
+    (``input_key`` hashes the stub code), as a real class's submissions do, so the reference cache only helps
+    within one submission."""
+    import nbformat
+
+    folder.mkdir(parents=True)
+    notebook = nbformat.read(REPO / "autograder" / "samples" / assignment / "complete.ipynb", as_version=4)
+    stubs = [c for c in notebook.cells if c.cell_type == "code" and c.get("metadata", {}).get("nbgrader", {}).get("solution")]
+    for i in range(n):
+        for cell in stubs:
+            cell.source = cell.source.rstrip("\n").rsplit("\n# submission ", 1)[0] + f"\n# submission {i}"
+        nbformat.write(notebook, folder / f"student{i:03d}.ipynb")
+
+
+def cache_price(assignment: str, n: int, jobs: int) -> dict:
+    """Wall and CPU seconds of a batch of N identical complete submissions (one draw of the hidden inputs: the
+    reference's answers computed once, then cached) and of N distinct ones (N draws: computed N times)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        make_class(Path(tmp) / "same", assignment, n, {"complete": n})
+        distinct_copies(Path(tmp) / "distinct", assignment, n)
+        same = timed_batch(assignment, Path(tmp) / "same", Path(tmp) / "same_out", jobs)
+        load_same = os.getloadavg()[0]
+        distinct = timed_batch(assignment, Path(tmp) / "distinct", Path(tmp) / "distinct_out", jobs)
+    return {"n": n, "jobs": jobs, "identical": {"wall": round(same[0], 2), "cpu": round(same[1], 2), "load": load_same},
+            "distinct": {"wall": round(distinct[0], 2), "cpu": round(distinct[1], 2), "load": os.getloadavg()[0]},
+            "meta": meta()}
 
 
 def timed_batch(assignment: str, folder: Path, out: Path, jobs: int) -> tuple[float, float]:
@@ -188,6 +223,8 @@ def main() -> None:
                         help="only the per-test records (no class), merged into the results file")
     parser.add_argument("--per-test", action="store_true",
                         help="also record where each hidden test's time goes (complete sample and reference alone)")
+    parser.add_argument("--cache-price", action="store_true",
+                        help="only compare a batch of N identical complete submissions with N distinct ones")
     parser.add_argument("--no-reference-cache", action="store_true",
                         help="recompute the reference's answers for every submission (as if hidden inputs varied)")
     args = parser.parse_args()
@@ -201,6 +238,19 @@ def main() -> None:
         return
 
     ids = args.ids or [i for i in course.assignment_ids() if course.suite_dir(i).is_dir()]
+    if args.cache_price:
+        out = REPO / "bench" / "results" / "class_throughput.json"
+        for assignment in ids:
+            found = cache_price(assignment, args.n, args.jobs)
+            print(f"{assignment}: {args.n} identical complete submissions {found['identical']['wall']:.0f} s wall "
+                  f"({found['identical']['cpu']:.0f} s CPU), {args.n} distinct {found['distinct']['wall']:.0f} s "
+                  f"({found['distinct']['cpu']:.0f} s CPU)", flush=True)
+            if args.record:
+                data = json.loads(out.read_text()) if out.exists() else {}
+                data.setdefault("meta", EARLIER_META)
+                data.setdefault("reference_cache_price", {})[assignment] = found
+                out.write_text(json.dumps(data, indent=1) + "\n")
+        return
     if args.startup:
         found = startup(ids, args.jobs)
         print(f"start-up of {len(ids)} assignments: one batch each {found['one_batch_per_assignment']['wall']:.0f} s wall, "
