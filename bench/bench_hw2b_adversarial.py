@@ -12,7 +12,7 @@ check of the three stubs against the `imitation` library's GAIL and AIRL code on
    run) the normalised true return of each carried-over policy and of each policy retrained from scratch on a
    recovered reward. Seeds 0..4 are the notebook's seeds, so the notebook's table is seed for seed this one.
 2. **Budgets** (``--notebook``): the solution notebook executed with ``FAST = True`` and with ``FAST = False``,
-   wall time of each.
+   wall time of each; (``--grade``) the complete sample graded once, wall time with the grader's start-up.
 3. **imitation** (version pinned in ``bench/requirements-hw2.txt``; its own venv, ``--bench-python``): seed 0's
    trained discriminators, evaluated on its demonstrations and on a batch of the final policy's transitions,
    are handed to imitation's ``ShapedRewardNet`` + ``AIRL.logits_expert_is_high`` (AIRL's logits),
@@ -206,6 +206,22 @@ def notebook_budgets() -> dict:
     return times
 
 
+def grading_time() -> dict:
+    """One complete submission (the complete sample) graded by ``python -m autograder grade``: wall time with the
+    grader's start-up, and the execution time the grader reports, with the load around it."""
+    import os
+
+    with tempfile.TemporaryDirectory() as tmp:
+        load, start = os.getloadavg(), time.perf_counter()
+        subprocess.run([sys.executable, "-m", "autograder", "grade", "hw2b_adversarial",
+                        str(REPO / "autograder" / "samples" / "hw2b_adversarial" / "complete.ipynb"), "--out", tmp],
+                       check=True, capture_output=True, cwd=REPO)
+        wall = time.perf_counter() - start
+        result = json.loads((Path(tmp) / "results.json").read_text())
+    return {"wall_s": round(wall, 2), "execution_time_s": result["execution_time"], "score": result["score"],
+            "load_before": [round(x, 2) for x in load]}
+
+
 def summary(seeds: dict) -> dict:
     from rlcourse.adversarial import LEARNERS, WORLD_NAMES
 
@@ -218,6 +234,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=BUDGET["N_SEEDS"])
     parser.add_argument("--notebook", action="store_true", help="also time the solution notebook (FAST and full)")
+    parser.add_argument("--grade", action="store_true", help="also time the grading of the complete sample")
     parser.add_argument("--bench-python", default=str(REPO / ".venv-bench" / "bin" / "python"))
     parser.add_argument("--imitation-worker", nargs=2, metavar=("IN", "OUT"))
     args = parser.parse_args()
@@ -241,18 +258,18 @@ def main() -> None:
               "score": "(J(pi) - J(uniform)) / (J(expert re-planned in that world) - J(uniform)), exact expectations",
               "seeds": seeds, "summary": summary(seeds),
               "imitation_check": run_imitation(ns, worlds, first, args.bench_python)}
-    if args.notebook:
-        record["notebook"] = notebook_budgets()
-    elif RESULTS.exists():
-        old = json.loads(RESULTS.read_text())
-        if "notebook" in old:
-            record["notebook"] = old["notebook"]
+    old = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    for key, wanted, measure in (("notebook", args.notebook, notebook_budgets), ("grading", args.grade, grading_time)):
+        if wanted:
+            record[key] = measure()
+        elif key in old:
+            record[key] = old[key]
     RESULTS.write_text(json.dumps(record, indent=1) + "\n")
     print(f"{'':18}" + "".join(f"{w:>16}" for w in WORLD_NAMES))
     for learner, row in record["summary"].items():
         print(f"{learner:18}" + "".join(f"{row[w]['mean']:>10.2f} ± {row[w]['std']:.2f}" for w in WORLD_NAMES))
     print("imitation check:", json.dumps(record["imitation_check"], indent=1))
-    print("notebook:", record.get("notebook"))
+    print("notebook:", record.get("notebook"), "grading:", record.get("grading"))
 
 
 if __name__ == "__main__":
