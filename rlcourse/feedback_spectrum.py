@@ -161,7 +161,7 @@ def fit_bradley_terry_linear(X: np.ndarray, pairs: np.ndarray, mu: np.ndarray, l
         loss = -np.mean(mu * log_expit(d) + (1 - mu) * log_expit(-d)) + l2 * w @ w
         grad = Z.T @ (np.exp(log_expit(d)) - mu) / len(mu) + 2 * l2 * w
         return loss, grad
-    return minimize(f, np.zeros(X.shape[1]), jac=True, method="L-BFGS-B").x
+    return minimize(f, np.zeros(X.shape[1]), jac=True, method="BFGS", options={"gtol": 1e-6}).x
 
 
 def fit_plackett_luce_linear(X: np.ndarray, groups: np.ndarray, order: np.ndarray, l2: float = 1e-3) -> np.ndarray:
@@ -178,7 +178,7 @@ def fit_plackett_luce_linear(X: np.ndarray, groups: np.ndarray, order: np.ndarra
         p = np.exp(s[:, None, :] - lse[:, :, None]) * np.triu(np.ones((s.shape[1],) * 2))[None]
         ds = p.sum(1) - 1.0                                                    # (n, k)
         return loss, np.einsum("nk,nkd->d", ds, F) / len(s) + 2 * l2 * w
-    return minimize(f, np.zeros(X.shape[1]), jac=True, method="L-BFGS-B").x
+    return minimize(f, np.zeros(X.shape[1]), jac=True, method="BFGS", options={"gtol": 1e-6}).x
 
 
 def accuracy_to_ceiling(scores: np.ndarray, prefs: HopperPreferences) -> float:
