@@ -21,15 +21,17 @@ class _Annotator:
     """Scores a review by a hidden token table; prefers the higher score with a graded probability, and answers
     exactly 0.5 on the pairs whose scores are closest (about a third). Records every call."""
 
-    def __init__(self, seed: int, no_preference: bool = False) -> None:
+    def __init__(self, seed: int, no_preference: bool = False, one: bool = False) -> None:
         self.table = torch.as_tensor(np.random.default_rng(seed).normal(size=13))
-        self.no_preference, self.calls = no_preference, []
+        self.no_preference, self.one, self.calls = no_preference, one, []
 
     def answer(self, a, b):
         d = self.table[a.long()].sum(1) - self.table[b.long()].sum(1)
         p = torch.sigmoid(2.0 * d)
         if self.no_preference:
             return torch.full_like(p, 0.5)
+        if self.one:                                   # a preference on the clearest pair only
+            return torch.where(torch.arange(len(d)) == d.abs().argmax(), p, torch.full_like(p, 0.5))
         close = d.abs() <= torch.quantile(d.abs(), 0.34)
         return torch.where(close, torch.full_like(p, 0.5), p)
 
@@ -68,12 +70,12 @@ def _trusted(prompts, beta, gen_seed, policy_seed, ref_seed, sampler_seed, lr, a
     return a, b, chosen, rejected, float(loss), before, policy.state_dict()
 
 
-def _round(student, rng, sampler=False, no_preference=False):
+def _round(student, rng, sampler=False, no_preference=False, one=False):
     prompts = _prompts(rng)
     beta = float(rng.uniform(0.3, 2.0))
     gen_seed, policy_seed, ref_seed = (int(x) for x in rng.integers(0, 10_000, size=3))
     sampler_seed = int(rng.integers(0, 10_000)) if sampler else None
-    models = _Annotator(int(rng.integers(0, 10_000)), no_preference)
+    models = _Annotator(int(rng.integers(0, 10_000)), no_preference, one)
     out, after, ref_after, sampler_after = student.helpers.run_round(
         lend(models, methods=["label"]), prompts, beta, gen_seed, policy_seed, ref_seed, sampler_seed=sampler_seed, lr=0.5)
     want = _trusted(prompts, beta, gen_seed, policy_seed, ref_seed, sampler_seed, 0.5, models)
@@ -159,3 +161,14 @@ def test_no_preference_no_step(student, rng):
         assert type(out[key]) is torch.Tensor and out[key].shape[0] == 0, f"{key} should be empty (0 rows)"
     before = trusted_lm(seeds[0]).state_dict()
     assert all(torch.equal(after[k], before[k]) for k in before), "with no labelled pair the policy must not take a step"
+
+
+@stub("online_dpo_round", points=1, hint="A round with a single labelled pair still takes its step: only a round with no "
+                                         "pair at all is skipped.")
+def test_a_single_labelled_pair(student, rng):
+    """Only one pair gets a preference: it is kept, and the policy takes one DPO step on it"""
+    out, after, _, _, models, want, _ = _round(student, rng, one=True)
+    _asked(models, want)
+    same_rows(out["chosen"], want[2], "chosen")
+    assert math.isclose(out["loss"], want[4], rel_tol=1e-4, abs_tol=1e-6), "the loss of the one labelled pair is wrong"
+    _moved_as_one_step(after, want)

@@ -55,8 +55,14 @@ def test_averaged_probability(student, rng):
 
 @stub("position_swap", points=2, hint=HINT)
 def test_consistent_verdicts_with_exact_ties(student, rng):
-    """Offset 1 on integer scores: some answers are exactly 0.5 (no pick); consistent where both orders pick the same"""
-    (p, consistent), p_ab, p_ba = _run(student, rng, 1.0)
+    """Offsets 1 and -1 on integer scores: some answers are exactly 0.5 (no pick), in either order; consistent where
+    both orders pick the same response"""
+    for offset in (1.0, -1.0):
+        _consistency(student, rng, offset)
+
+
+def _consistency(student, rng, offset):
+    (p, consistent), p_ab, p_ba = _run(student, rng, offset)
     assert type(consistent) is torch.Tensor and consistent.dtype == torch.bool and tuple(consistent.shape) == (60,), \
         "consistent should be an (N,) torch bool tensor"
     want = ((p_ab > 0.5) & (p_ba < 0.5)) | ((p_ab < 0.5) & (p_ba > 0.5))
