@@ -4,6 +4,7 @@ learned judge with planted biases, with and without debiasing; 3 seeds.
     python bench/bench_hw7b_ai_feedback.py                 # seeds 0, 1, 2 one after the other, then the tables
     python bench/bench_hw7b_ai_feedback.py --seed 1        # one seed, to bench/results/hw7b_ai_feedback.seed1.json
     python bench/bench_hw7b_ai_feedback.py --merge         # merge the per-seed files into bench/results/hw7b_ai_feedback.json
+    python bench/bench_hw7b_ai_feedback.py --budgets       # FAST notebook and one complete submission graded, timed
 
 Each seed executes every code cell of the solution notebook at its full budget (``FAST = False``) with
 ``SEED`` set to the seed, so the benchmark's numbers are the notebook's and the wall time of seed 0 is the
@@ -151,17 +152,50 @@ def merge() -> dict:
     return result
 
 
+def budgets(repeats: int = 2) -> dict:
+    """Wall time of the solution notebook with ``FAST = True`` in a real kernel, and of grading the complete sample
+    (start-up included, ``python -m autograder grade``), each ``repeats`` times, with the load at the time."""
+    import os
+    import subprocess
+    import tempfile
+
+    from autograder.authoring.nbrun import run_notebook
+    from bench.run_record import meta
+
+    fast, grade = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            report = run_notebook(NOTEBOOK, {"FAST": True}, timeout=300, cwd=Path(tmp))
+            fast.append(time.perf_counter() - t0)
+            assert report.ok, report.describe("hw7b_ai_feedback")
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "autograder", "grade", "hw7b_ai_feedback",
+                            str(REPO / "autograder" / "samples" / "hw7b_ai_feedback" / "complete.ipynb"), "--out", tmp],
+                           check=True, capture_output=True, cwd=REPO)
+            grade.append(time.perf_counter() - t0)
+    return {"meta": meta(), "fast_notebook_s": fast, "complete_graded_s": grade, "load_after": list(os.getloadavg())}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--seed", type=int, help="run this one seed and write its file")
     parser.add_argument("--merge", action="store_true", help="merge the per-seed files and print the tables")
+    parser.add_argument("--budgets", action="store_true", help="time the FAST notebook and one grading, record them")
     parser.add_argument("--smoke", action="store_true", help="FAST budgets, results to a scratch folder (checks the script)")
     args = parser.parse_args()
     global RESULTS
     if args.smoke:
         RESULTS = Path("/tmp/hw7b_bench_smoke")
     RESULTS.mkdir(parents=True, exist_ok=True)
+    if args.budgets:
+        path = RESULTS / "hw7b_ai_feedback.json"
+        result = json.loads(path.read_text())
+        result["budgets"] = budgets()
+        path.write_text(json.dumps(result, indent=1) + "\n")
+        print(json.dumps(result["budgets"], indent=1))
+        return
     todo = [] if args.merge else ([args.seed] if args.seed is not None else list(range(args.seeds)))
     for seed in todo:
         t0 = time.perf_counter()
