@@ -26,6 +26,22 @@ FIRST_KEY = 1_000_003
 """Draws use keys FIRST_KEY, FIRST_KEY + 1, ...: none is the key of a sample submission."""
 
 
+def student_transport(namespace: dict, helpers: str | None):
+    """The reference's namespace behind a transport that reports what it raises as a student's error, as a
+    sandbox does (a test that expects a ``ValueError`` for bad input then sees one)."""
+    from autograder.core.session import LocalTransport, StudentError
+
+    class AsStudent(LocalTransport):
+        def request(self, header, blobs, timeout=None):
+            try:
+                return super().request(header, blobs, timeout)
+            except Exception as err:  # noqa: BLE001 - the "student" raised it
+                cause = err.__cause__ or err
+                raise StudentError(type(cause).__name__, str(cause)) from cause
+
+    return AsStudent(namespace, helpers)
+
+
 def reference_draws(assignment: str, draws: int, first: int = FIRST_KEY) -> dict:
     """The tests the reference fails, by input key, over ``draws`` keys, and the seconds it took."""
     from autograder.core.grader import Grader, SuitePlugin, build_reference
@@ -39,7 +55,7 @@ def reference_draws(assignment: str, draws: int, first: int = FIRST_KEY) -> dict
         tests = 0
         start = time.perf_counter()
         for key in range(first, first + draws):
-            plugin = SuitePlugin(Namespace(LocalTransport(alone, grader.helpers), "student"),
+            plugin = SuitePlugin(Namespace(student_transport(alone, grader.helpers), "student"),
                                  Namespace(LocalTransport(grader.reference_ns, grader.helpers, ReferenceCache()),
                                            "reference"), {}, None, grader.dependencies, key)
             grader._run_suite(plugin)
