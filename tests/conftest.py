@@ -47,3 +47,36 @@ def with_cells(source_nb: Path, out: Path, replacements: dict[str, str | None]) 
     nbformat.write(nb, str(out))
     os.chmod(out, 0o644)
     return out
+
+
+def check_hand_mutants(assignment: str, mutants: dict[str, dict[str, tuple[str, str]]], folder: Path) -> None:
+    """Grade the complete sample with each hand-written mutant (``{stub: {label: (old text, new text)}}`` applied
+    to the solution's stub) by the real grader: each must lose points on its own stub and nowhere else. With
+    ``-s`` a table of kills per stub is printed."""
+    from autograder.authoring.samples import solution_sources
+    from autograder.outputs.files import grade_folder
+
+    solved = solution_sources(assignment)
+    complete = course.samples_dir(assignment) / "complete.ipynb"
+    names = {}
+    for stub, changes in mutants.items():
+        for i, (label, (old, new)) in enumerate(changes.items()):
+            assert solved[stub].count(old) >= 1, f"{stub} / {label}: the text to mutate is not in the solution"
+            name = f"{stub}__{i}"
+            names[name] = (stub, label)
+            with_cells(complete, folder / "mutants" / f"{name}.ipynb", {stub: solved[stub].replace(old, new)})
+    results = {r.submission: r for r in grade_folder(assignment, folder / "mutants", folder / "out", jobs=2,
+                                                     progress=False)}
+    survivors, leaks, report = [], [], {}
+    for name, (stub, label) in names.items():
+        scores = {s.name: (s.score, s.max_score) for s in results[name].stubs}
+        killed = scores[stub][0] < scores[stub][1]
+        report.setdefault(stub, []).append(killed)
+        if not killed:
+            survivors.append(f"{stub}: {label}")
+        leaks += [f"{stub}: {label} cost {other}" for other, (got, top) in scores.items() if other != stub and got < top]
+    print("\n| stub | mutants | killed |\n|---|---:|---:|")
+    for stub, kills in report.items():
+        print(f"| `{stub}` | {len(kills)} | {sum(kills)} ({sum(kills) / len(kills):.0%}) |")
+    assert not leaks, leaks
+    assert not survivors, f"mutants the suite does not catch: {survivors}"
