@@ -7,12 +7,10 @@ import re
 import nbformat
 import numpy as np
 import pytest
-import torch
 import torch.nn.functional as F
 
 from conftest import REPO
 from rlcourse import adversarial as A
-from rlcourse.gridworld import random_mdp
 
 
 def discriminator_loss(e, p):

@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from autograder.core import course
-from autograder.outputs.files import grade_folder
-from autograder.authoring.samples import solution_sources
-from conftest import with_cells
+from conftest import check_hand_mutants
 
 pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make test and CI run it
 
@@ -79,27 +76,4 @@ MUTANTS = {
 
 
 def test_every_mutant_loses_points_on_its_own_stub_and_only_there(open_tmp):
-    solved = solution_sources(ID)
-    complete = course.samples_dir(ID) / "complete.ipynb"
-    folder = open_tmp / "mutants"
-    names = {}
-    for stub, mutants in MUTANTS.items():
-        for i, (label, (old, new)) in enumerate(mutants.items()):
-            assert solved[stub].count(old) >= 1, f"{stub} / {label}: the text to mutate is not in the solution"
-            name = f"{stub}__{i}"
-            names[name] = (stub, label)
-            with_cells(complete, folder / f"{name}.ipynb", {stub: solved[stub].replace(old, new)})
-    results = {r.submission: r for r in grade_folder(ID, folder, open_tmp / "out", jobs=2, progress=False)}
-    survivors, leaks, report = [], [], {}
-    for name, (stub, label) in names.items():
-        scores = {s.name: (s.score, s.max_score) for s in results[name].stubs}
-        killed = scores[stub][0] < scores[stub][1]
-        report.setdefault(stub, []).append(killed)
-        if not killed:
-            survivors.append(f"{stub}: {label}")
-        leaks += [f"{stub}: {label} cost {other}" for other, (got, top) in scores.items() if other != stub and got < top]
-    print("\n| stub | mutants | killed |\n|---|---:|---:|")
-    for stub, kills in report.items():
-        print(f"| `{stub}` | {len(kills)} | {sum(kills)} ({sum(kills) / len(kills):.0%}) |")
-    assert not leaks, leaks
-    assert not survivors, f"mutants the suite does not catch: {survivors}"
+    check_hand_mutants(ID, MUTANTS, open_tmp)
