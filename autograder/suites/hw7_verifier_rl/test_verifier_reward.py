@@ -9,7 +9,7 @@ HINT = ("Read a and b from the prompt (tokens 1-3 and 5-7, digit d is token 3 + 
         "FIRST <eos> (2) after the 9 prompt tokens: 1 to 4 digit tokens, no leading zero unless it is the only digit.")
 
 
-def _judge(student, tokens, what):
+def _check_judged(student, tokens, what):
     out = student.verifier_reward(tokens)
     assert isinstance(out, tuple) and len(out) == 2, "return a tuple (format_ok, correct)"
     fmt, cor = out
@@ -34,7 +34,7 @@ def describe_completion(row) -> str:
 @stub("verifier_reward", points=2, hint=HINT)
 def test_random_answers_of_every_kind(student, rng, random_answers):
     """Right, wrong, unstopped, leading-zero, garbage-after-<eos> and random completions"""
-    _judge(student, random_answers(rng, n=60), "60 random completions")
+    _check_judged(student, random_answers(rng, n=60), "60 random completions")
 
 
 @stub("verifier_reward", points=2, hint=HINT)
@@ -42,10 +42,10 @@ def test_sums_are_read_from_each_prompt(student, rng):
     """Every row gives the right sum of a different problem; the same answers under shuffled prompts are mostly wrong"""
     a, b = rng.integers(0, 1000, size=30), rng.integers(0, 1000, size=30)
     good = rows([(int(x), int(y), number_tokens(int(x + y)) + [EOS]) for x, y in zip(a, b)])
-    _judge(student, good, "30 right answers")
+    _check_judged(student, good, "30 right answers")
     perm = np.roll(np.arange(30), 7)
     swapped = rows([(int(a[j]), int(b[j]), number_tokens(int(a[i] + b[i])) + [EOS]) for i, j in enumerate(perm)])
-    _judge(student, swapped, "30 answers to other prompts")
+    _check_judged(student, swapped, "30 answers to other prompts")
 
 
 @stub("verifier_reward", points=2, hint="Leading zeros: '0' alone is a well-formed answer (0 + 0), '05' is not; "
@@ -59,7 +59,7 @@ def test_edge_cases_of_the_format(student):
              (12, 34, [EOS]), (12, 34, number_tokens(46) + [SEMI, EOS]), (12, 34, number_tokens(46) + [EOS, SEMI, 5]),
              (12, 34, number_tokens(46) + [0, EOS]), (12, 34, number_tokens(46) + [13, EOS]),
              (1, 2, number_tokens(3) + [EOS, EOS]), (10, 5, number_tokens(15) + [EOS])]
-    _judge(student, rows(items, width=16), "hand-made edge cases")
+    _check_judged(student, rows(items, width=16), "hand-made edge cases")
 
 
 @stub("verifier_reward", points=1, hint="The completion starts right after the 9 prompt tokens; any row length T > 9.")
@@ -67,6 +67,6 @@ def test_other_widths_and_input_left_alone(student, rng, random_answers):
     """Rows of 11 and of 24 tokens; the input tensor is not modified"""
     for width in (11, 24):
         x = random_answers(rng, n=20, width=width)
-        _judge(student, x, f"rows of {width} tokens")
+        _check_judged(student, x, f"rows of {width} tokens")
         _, args, _ = student.helpers.call_and_inputs("verifier_reward", [x])
         assert np.array_equal(as_array(args[0], "the tokens"), x.numpy()), "verifier_reward modified its input"

@@ -84,7 +84,7 @@ def _round(student, rng, sampler=False, no_preference=False, one=False):
     return out, after, ref_after, sampler_after, models, want, (policy_seed, ref_seed, sampler_seed)
 
 
-def _asked(models, want):
+def _check_asked(models, want):
     a, b = want[0], want[1]
     assert len(models.calls) == 1, f"the annotator should be called once per round, it was called {len(models.calls)} times"
     got_a, got_b = models.calls[0]
@@ -111,14 +111,14 @@ def _moved_as_one_step(after, want, what="the policy"):
 def test_asks_about_the_policys_own_pairs(student, rng):
     """Six prompts: the annotator is asked once, about the two samples of each prompt drawn from the policy"""
     out, *_, models, want, _ = _round(student, rng)
-    _asked(models, want)
+    _check_asked(models, want)
 
 
 @stub("online_dpo_round", points=2, hint=HINT)
 def test_orients_the_pairs_and_drops_ties(student, rng):
     """chosen and rejected follow the annotator's answers (> 0.5: a; < 0.5: b), pairs answered 0.5 left out"""
     out, *_, models, want, _ = _round(student, rng)
-    _asked(models, want)
+    _check_asked(models, want)
     same_rows(out["chosen"], want[2], "chosen")
     same_rows(out["rejected"], want[3], "rejected")
 
@@ -127,7 +127,7 @@ def test_orients_the_pairs_and_drops_ties(student, rng):
 def test_one_dpo_step(student, rng):
     """Policy and reference differ: the loss and the policy's change are one DPO step (SGD); ref is untouched"""
     out, after, ref_after, _, models, want, seeds = _round(student, rng)
-    _asked(models, want)
+    _check_asked(models, want)
     loss = out["loss"]
     assert isinstance(loss, float) and math.isfinite(loss), f"'loss' should be a finite Python float, got {loss!r}"
     assert math.isclose(loss, want[4], rel_tol=1e-4, abs_tol=1e-6), \
@@ -142,7 +142,7 @@ def test_one_dpo_step(student, rng):
 def test_pairs_from_the_sampler(student, rng):
     """A sampler is given: the pairs come from it, the policy takes the step, the sampler is untouched"""
     out, after, _, sampler_after, models, want, seeds = _round(student, rng, sampler=True)
-    _asked(models, want)
+    _check_asked(models, want)
     same_rows(out["chosen"], want[2], "chosen")
     _moved_as_one_step(after, want)
     sampler = trusted_lm(seeds[2]).state_dict()
@@ -155,7 +155,7 @@ def test_pairs_from_the_sampler(student, rng):
 def test_no_preference_no_step(student, rng):
     """Every answer is 0.5: no step (the policy keeps its weights), loss NaN, empty chosen and rejected"""
     out, after, _, _, models, want, seeds = _round(student, rng, no_preference=True)
-    _asked(models, want)
+    _check_asked(models, want)
     assert isinstance(out["loss"], float) and math.isnan(out["loss"]), "with no labelled pair the loss should be nan"
     for key in ("chosen", "rejected"):
         assert type(out[key]) is torch.Tensor and out[key].shape[0] == 0, f"{key} should be empty (0 rows)"
@@ -168,7 +168,7 @@ def test_no_preference_no_step(student, rng):
 def test_a_single_labelled_pair(student, rng):
     """Only one pair gets a preference: it is kept, and the policy takes one DPO step on it"""
     out, after, _, _, models, want, _ = _round(student, rng, one=True)
-    _asked(models, want)
+    _check_asked(models, want)
     same_rows(out["chosen"], want[2], "chosen")
     assert math.isclose(out["loss"], want[4], rel_tol=1e-4, abs_tol=1e-6), "the loss of the one labelled pair is wrong"
     _moved_as_one_step(after, want)

@@ -58,10 +58,10 @@ def test_consistent_verdicts_with_exact_ties(student, rng):
     """Offsets 1 and -1 on integer scores: some answers are exactly 0.5 (no pick), in either order; consistent where
     both orders pick the same response"""
     for offset in (1.0, -1.0):
-        _consistency(student, rng, offset)
+        _check_consistency(student, rng, offset)
 
 
-def _consistency(student, rng, offset):
+def _check_consistency(student, rng, offset):
     (p, consistent), p_ab, p_ba = _run(student, rng, offset)
     assert type(consistent) is torch.Tensor and consistent.dtype == torch.bool and tuple(consistent.shape) == (60,), \
         "consistent should be an (N,) torch bool tensor"
