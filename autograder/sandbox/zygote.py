@@ -50,6 +50,8 @@ def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, exis
             isolation.build_view(config.view, config.limits.tmp_bytes)
         own_uid = uid if level == "full" or (level == "none" and os.geteuid() == 0) else None
         os.makedirs(workdir, exist_ok=True)
+        if level != "none":  # in the view's private /tmp: the worker reads and writes it as the checkout's owner
+            os.chmod(workdir, 0o777)  # (its file-system identity) and, in programs it starts, as its own uid
         if own_uid is not None:
             os.chown(workdir, own_uid, own_uid)
         os.chdir(workdir)
