@@ -129,3 +129,50 @@ def check_tensor(got: Any, want: Any, rtol: float = 1e-5, atol: float = 1e-7, na
         _fail(f"{name} should be a torch tensor, got {describe(got)}")
     want_np = want.detach().numpy() if isinstance(want, torch.Tensor) else np.asarray(want)
     check_array(got.detach().numpy(), want_np, rtol, atol, name)
+
+
+def tensor_values(got: Any, name: str, nan_hint: str = "a division by zero?") -> np.ndarray:
+    """The student's torch tensor (not a subclass) as a float64 array, after checking it is finite; ``nan_hint``
+    says, in the message, where a NaN most likely came from."""
+    import torch
+
+    assert type(got) is torch.Tensor, f"{name} should be a torch tensor, got {type(got).__name__}"
+    out = got.detach().numpy().astype(np.float64)
+    assert np.isfinite(out).all(), f"{name} contains NaN or inf ({nan_hint})"
+    return out
+
+
+def expect_close(got: Any, want: Any, name: str, rtol: float = 1e-6, atol: float = 1e-9, shape: tuple | None = None,
+                 nan_hint: str = "a division by zero?") -> None:
+    """``got`` (a torch tensor) matches ``want`` (a numpy array or float) in shape (``shape``, if given) and values.
+
+    The message says which entry is wrong, whether the sign agrees, and the size of the relative error, but never
+    the expected value itself.
+    """
+    want = np.asarray(want, dtype=np.float64)
+    g = tensor_values(got, name, nan_hint)
+    expected_shape = want.shape if shape is None else shape
+    assert g.shape == expected_shape, f"{name} has shape {tuple(g.shape)}, expected {tuple(expected_shape)}"
+    wrong = ~np.isclose(g, want, rtol=rtol, atol=atol)
+    if wrong.any():
+        idx = tuple(int(i) for i in np.argwhere(wrong)[0]) if g.ndim else ()
+        gv, wv = float(g[idx]), float(want[idx])
+        where = f" at index {idx}" if idx else ""
+        if np.sign(gv) != np.sign(wv) and abs(wv) > atol:
+            why = "has the wrong sign"
+        else:
+            rel = abs(gv - wv) / max(abs(wv), atol)
+            why = (f"is {'too large' if abs(gv) > abs(wv) else 'too small'} "
+                   f"(relative error about 1e{int(np.floor(np.log10(max(rel, 1e-300))))})")
+        raise AssertionError(f"{name}{where} {why}; {int(wrong.sum())} of {wrong.size} entries are wrong")
+
+
+def tensor_scalar(got: Any, name: str = "the loss") -> float:
+    """A 0-dim torch tensor's finite value."""
+    import torch
+
+    assert type(got) is torch.Tensor and got.dim() == 0, \
+        f"{name} should be a 0-dim torch tensor, got {type(got).__name__} of shape {tuple(getattr(got, 'shape', ()))}"
+    value = float(got)
+    assert np.isfinite(value), f"{name} is {value}"
+    return value

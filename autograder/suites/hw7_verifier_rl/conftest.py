@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 import torch
 
+from autograder.suite import expect_close as check_close, tensor_scalar, tensor_values
+
 DIGIT0, EOS, BOS, PLUS, EQUALS, SEMI = 3, 2, 1, 13, 14, 15
 
 
@@ -41,39 +43,14 @@ def trusted_check(tokens: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
     return np.array(fmt), np.array(cor)
 
 
+scalar = tensor_scalar
+
+
 def as_array(got, name: str) -> np.ndarray:
-    """The student's torch tensor as a float64 array, after checking it is a plain, finite tensor."""
-    assert type(got) is torch.Tensor, f"{name} should be a torch tensor, got {type(got).__name__}"
-    out = got.detach().numpy().astype(np.float64)
-    assert np.isfinite(out).all(), f"{name} contains NaN or inf (a division by zero?)"
-    return out
+    return tensor_values(got, name)
 
 
-def expect_close(got, want, name: str, rtol: float = 1e-6, atol: float = 1e-9, shape: tuple | None = None) -> None:
-    """``got`` (a torch tensor) matches ``want``; the message says which entry differs and how, not the value."""
-    want = np.asarray(want, dtype=np.float64)
-    g = as_array(got, name)
-    expected_shape = want.shape if shape is None else shape
-    assert g.shape == expected_shape, f"{name} has shape {tuple(g.shape)}, expected {tuple(expected_shape)}"
-    wrong = ~np.isclose(g, want, rtol=rtol, atol=atol)
-    if wrong.any():
-        idx = tuple(int(i) for i in np.argwhere(wrong)[0]) if g.ndim else ()
-        gv, wv = float(g[idx]), float(want[idx])
-        where = f" at index {idx}" if idx else ""
-        if np.sign(gv) != np.sign(wv) and abs(wv) > atol:
-            why = "has the wrong sign"
-        else:
-            rel = abs(gv - wv) / max(abs(wv), atol)
-            why = f"is {'too large' if abs(gv) > abs(wv) else 'too small'} (relative error about 1e{int(np.floor(np.log10(max(rel, 1e-300))))})"
-        assert False, f"{name}{where} {why}; {int(wrong.sum())} of {wrong.size} entries are wrong"
-
-
-def scalar(got, name: str = "the loss") -> float:
-    assert type(got) is torch.Tensor and got.dim() == 0, \
-        f"{name} should be a 0-dim torch tensor, got {type(got).__name__} of shape {tuple(getattr(got, 'shape', ()))}"
-    value = float(got)
-    assert np.isfinite(value), f"{name} is {value}"
-    return value
+expect_close = check_close
 
 
 @pytest.fixture
