@@ -63,10 +63,11 @@ def _trusted(prompts, beta, gen_seed, policy_seed, ref_seed, sampler_seed, lr, a
         rc, rr = completion_log_prob_sums(ref, chosen, p), completion_log_prob_sums(ref, rejected, p)
     loss = -F.logsigmoid(beta * ((completion_log_prob_sums(policy, chosen, p) - rc)
                                  - (completion_log_prob_sums(policy, rejected, p) - rr))).mean()
-    opt = torch.optim.SGD(policy.parameters(), lr=lr)
-    opt.zero_grad()
+    policy.zero_grad(set_to_none=True)
     loss.backward()
-    opt.step()
+    with torch.no_grad():                      # SGD's step, written out (no torch optimizer: see sandbox_helpers)
+        for param in policy.parameters():
+            param.add_(param.grad, alpha=-lr)
     return a, b, chosen, rejected, float(loss), before, policy.state_dict()
 
 
