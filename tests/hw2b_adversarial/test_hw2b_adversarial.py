@@ -172,3 +172,19 @@ def test_the_recorded_transfer_table():
         assert np.isclose(check["gail_loss_ratio_ours_over_theirs"], 2.0) and np.isclose(check["airl_loss_ratio_ours_over_theirs"], 2.0)
     budgets = record["notebook"]
     assert budgets["fast_s"] < 90 and budgets["full_s"] < 20 * 60
+
+
+def test_the_notebooks_findings_are_the_recorded_ones():
+    """The solution notebook's paragraph on the benchmark is exactly what ``bench/bench_hw2b_adversarial.py
+    --findings`` writes from the recorded file, and the student release carries the same paragraph: a rerun of the
+    benchmark that changes a figure fails here until the paragraph is rewritten from it."""
+    import sys
+
+    sys.path.insert(0, str(REPO))
+    from bench.bench_hw2b_adversarial import FINDINGS_HEAD, findings
+
+    want = findings(json.loads((REPO / "bench" / "results" / "hw2b_adversarial.json").read_text()))
+    for tree in ("solutions", "assignments"):
+        nb = nbformat.read(REPO / tree / "hw2b_adversarial" / "hw2b_adversarial.ipynb", as_version=4)
+        cells = [c.source for c in nb.cells if c.cell_type == "markdown" and c.source.startswith(FINDINGS_HEAD)]
+        assert cells == [want], f"{tree}: the findings paragraph differs from the recorded benchmark's"
