@@ -149,3 +149,37 @@ def test_the_recorded_benchmark_has_three_seeds_of_every_method_and_annotator():
         for name, curve in run["curves"].items():
             assert curve[0]["kl"] == pytest.approx(0.0, abs=1e-6) and all(math.isfinite(e["gold"]) for e in curve), name
         assert run["notebook_s"] < 20 * 60, "the full notebook exceeds its 20-minute budget"
+
+
+def test_the_notebooks_figures_are_the_recorded_ones():
+    """Every figure the solution notebook quotes from the benchmark (its budget line and the findings paragraph) is
+    the recorded file's, formatted as the notebook prints it (mean ± population sd over the seeds)."""
+    import nbformat
+
+    result = json.loads((REPO / "bench" / "results" / "hw7b_ai_feedback.json").read_text())
+    seeds = list(result["seeds"].values())
+
+    def ms(values, digits=3):
+        v = np.asarray(values, dtype=float)
+        return f"{v.mean():.{digits}f} \\pm {v.std():.{digits}f}"
+
+    def mean(values, digits):
+        return f"{np.mean(values):.{digits}f}"
+
+    matched = {m: ms([s["matched"][m]["2.0"] for s in seeds]) for m in ("online DPO", "iterative DPO", "offline DPO",
+                                                                         "PPO")}
+    table = lambda m, k: [s["judge_table"][m][k] for s in seeds]  # noqa: E731
+    agree = lambda m: f"{100 * np.mean([s['agreement'][m]['agreement'] for s in seeds]):.1f}%"  # noqa: E731
+    seconds = [s["notebook_s"] for s in seeds]
+    want = [*matched.values(), f"from {mean(table('SFT', 'length'), 1)} to {mean(table('judge, one order', 'length'), 1)} tokens",
+            f"policy's: {mean(table('simulated person (online DPO above)', 'length'), 1)}",
+            ms(table("judge, one order", "gold")), ms(table("simulated person (online DPO above)", "gold")),
+            f"${mean(table('judge, both orders', 'gold'), 3)}$", f"${mean(table('judge, consistent verdicts only', 'gold'), 3)}$",
+            f"{mean(table('length-controlled judge, both orders', 'length'), 1)} tokens",
+            ms(table("length-controlled judge, both orders", "gold")), agree("judge, both orders"),
+            agree("judge, one order"), agree("judge, consistent verdicts only"),
+            f"({min(seconds):.0f} to {max(seconds):.0f} s)"]
+    nb = nbformat.read(REPO / "solutions" / "hw7b_ai_feedback" / "hw7b_ai_feedback.ipynb", as_version=4)
+    text = " ".join(c.source.replace("\n", " ") for c in nb.cells if c.cell_type == "markdown")
+    missing = [w for w in want if w not in text]
+    assert not missing, f"figures of bench/results/hw7b_ai_feedback.json the notebook does not quote: {missing}"
