@@ -5,6 +5,7 @@ learned judge with planted biases, with and without debiasing; 3 seeds.
     python bench/bench_hw7b_ai_feedback.py --seed 1        # one seed, to bench/results/hw7b_ai_feedback.seed1.json
     python bench/bench_hw7b_ai_feedback.py --merge         # merge the per-seed files into bench/results/hw7b_ai_feedback.json
     python bench/bench_hw7b_ai_feedback.py --budgets       # FAST notebook and one complete submission graded, timed
+    python bench/bench_hw7b_ai_feedback.py --budgets --paired COMMIT   # and the grading with COMMIT's suite, alternately
 
 Each seed executes every code cell of the solution notebook at its full budget (``FAST = False``) with
 ``SEED`` set to the seed, so the benchmark's numbers are the notebook's and the wall time of seed 0 is the
@@ -152,9 +153,33 @@ def merge() -> dict:
     return result
 
 
-def budgets(repeats: int = 2) -> dict:
+def _grade_once(tree: Path = REPO) -> dict:
+    """``python -m autograder grade`` of the complete sample with the suite of ``tree`` (a checkout of the course, this
+    one by default): wall seconds with start-up, the grading's own execution time, the load just before."""
+    import os
+    import subprocess
+    import tempfile
+
+    env = dict(os.environ)
+    if tree != REPO:  # an earlier commit unpacked elsewhere: its code, suites and reference (PYTHONPATH wins over the
+        env.update(RLCOURSE_REPO=str(tree), PYTHONPATH=str(tree))  # editable install)
+    load = [round(x, 2) for x in os.getloadavg()]
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "autograder", "grade", "hw7b_ai_feedback",
+                        str(REPO / "autograder" / "samples" / "hw7b_ai_feedback" / "complete.ipynb"), "--out", tmp],
+                       check=True, capture_output=True, cwd=tree, env=env)
+        wall = time.perf_counter() - t0
+        graded = json.loads((Path(tmp) / "results.json").read_text())
+    return {"wall_s": round(wall, 2), "execution_time_s": graded["execution_time"], "score": graded["score"],
+            "load_before": load}
+
+
+def budgets(repeats: int = 2, paired: str | None = None) -> dict:
     """Wall time of the solution notebook with ``FAST = True`` in a real kernel, and of grading the complete sample
-    (start-up included, ``python -m autograder grade``), each ``repeats`` times, with the load at the time."""
+    (start-up included, ``python -m autograder grade``), each ``repeats`` times, with the load at the time. With
+    ``paired`` (a commit), the grading is also timed with that commit's suite and code, alternating with this
+    checkout's, so that both see the same load."""
     import os
     import subprocess
     import tempfile
@@ -162,19 +187,29 @@ def budgets(repeats: int = 2) -> dict:
     from autograder.authoring.nbrun import run_notebook
     from bench.run_record import meta
 
-    fast, grade = [], []
+    fast, grade, fast_load = [], [], []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as tmp:
+            fast_load.append([round(x, 2) for x in os.getloadavg()])
             t0 = time.perf_counter()
             report = run_notebook(NOTEBOOK, {"FAST": True}, timeout=300, cwd=Path(tmp))
-            fast.append(time.perf_counter() - t0)
+            fast.append(round(time.perf_counter() - t0, 2))
             assert report.ok, report.describe("hw7b_ai_feedback")
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "autograder", "grade", "hw7b_ai_feedback",
-                            str(REPO / "autograder" / "samples" / "hw7b_ai_feedback" / "complete.ipynb"), "--out", tmp],
-                           check=True, capture_output=True, cwd=REPO)
-            grade.append(time.perf_counter() - t0)
-    return {"meta": meta(), "fast_notebook_s": fast, "complete_graded_s": grade, "load_after": list(os.getloadavg())}
+        grade.append(_grade_once())
+    out = {"meta": meta(), "fast_notebook_s": fast, "fast_load_before": fast_load,
+           "complete_graded_s": [g["wall_s"] for g in grade], "complete_graded": grade,
+           "load_after": [round(x, 2) for x in os.getloadavg()]}
+    if paired:
+        with tempfile.TemporaryDirectory() as old:
+            archive = subprocess.run(["git", "archive", paired], cwd=REPO, capture_output=True, check=True).stdout
+            subprocess.run(["tar", "-x", "-C", old], input=archive, check=True)
+            rows = []
+            for _ in range(repeats + 1):
+                rows.append({"this": _grade_once(), "earlier": _grade_once(Path(old))})
+        out["paired"] = {"earlier_commit": paired, "rows": rows,
+                         "this_median_s": float(np.median([r["this"]["wall_s"] for r in rows])),
+                         "earlier_median_s": float(np.median([r["earlier"]["wall_s"] for r in rows]))}
+    return out
 
 
 def main() -> None:
@@ -183,6 +218,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, help="run this one seed and write its file")
     parser.add_argument("--merge", action="store_true", help="merge the per-seed files and print the tables")
     parser.add_argument("--budgets", action="store_true", help="time the FAST notebook and one grading, record them")
+    parser.add_argument("--paired", metavar="COMMIT",
+                        help="with --budgets: also time the grading with COMMIT's suite, alternating with this one's")
     parser.add_argument("--smoke", action="store_true", help="FAST budgets, results to a scratch folder (checks the script)")
     args = parser.parse_args()
     global RESULTS
@@ -192,7 +229,7 @@ def main() -> None:
     if args.budgets:
         path = RESULTS / "hw7b_ai_feedback.json"
         result = json.loads(path.read_text())
-        result["budgets"] = budgets()
+        result["budgets"] = budgets(paired=args.paired)
         path.write_text(json.dumps(result, indent=1) + "\n")
         print(json.dumps(result["budgets"], indent=1))
         return
