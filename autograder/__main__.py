@@ -15,7 +15,8 @@
   assignments [ID ...]               regenerate student notebooks from solutions/ (nbgrader)
   student-release OUT                build the student-only tree
   samples ID                         regenerate the sample submissions of an assignment
-  permissions [--root DIR] [--no-environment]   in a grading container: file modes that wall the hidden files
+  permissions [--root DIR] [--no-environment] [--assignment ID]   in a grading container: file modes that wall
+                                     the hidden files
                                      off a worker run without namespaces (the Gradescope and PrairieLearn routes)
   new ID [--title TEXT]              write a new assignment's two-stub skeleton (notebook, suite, samples)
   mutants ID [--stub S] [--max-per-stub N]   grade mutants of each solution stub (autograder/authoring/mutants.py)
@@ -198,9 +199,11 @@ def _cmd_student_release(args: argparse.Namespace) -> int:
 def _cmd_permissions(args: argparse.Namespace) -> int:
     from autograder.core.course import REPO, set_container_permissions
 
-    changed = set_container_permissions(args.root or REPO, environment=not args.no_environment)
+    changed = set_container_permissions(args.root or REPO, environment=not args.no_environment,
+                                        assignment=args.assignment)
     print(f"{len(changed)} file modes changed under {args.root or REPO}" + (" (and its virtual environment)"
-                                                                          if not args.no_environment else ""))
+                                                                          if not args.no_environment else "")
+          + (f" for grading {args.assignment}" if args.assignment else ""))
     return 0
 
 
@@ -288,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("permissions", help="set the file modes a worker without namespaces needs (grading containers)")
     p.add_argument("--root", type=Path, default=None, help="the course checkout (default: the one being graded)")
     p.add_argument("--no-environment", action="store_true", help="leave the virtual environment's modes as they are")
+    p.add_argument("--assignment", default=None, help="the assignment this container grades: the library modules "
+                   "grading it does not need become readable by their owner only (a worker refuses otherwise)")
     p.set_defaults(fn=_cmd_permissions)
     p = sub.add_parser("new", help="write a new assignment's skeleton")
     p.add_argument("assignment")

@@ -60,6 +60,7 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
     import torch
 
     from rlcourse import group_rl as G
+    from rlcourse import group_training as GT
     from rlcourse import lm_training as L
     from rlcourse import reviews as R
     from rlcourse.lm import generate, load_sft
@@ -106,7 +107,7 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
                 continue
             t0 = time.perf_counter()
             advantage_fn, length_norm = variants[variant]
-            policy, log = L.critic_free_train(sft, fn, prompts, advantage_fn, hw6["grpo_token_loss"], iters=it,
+            policy, log = GT.critic_free_train(sft, fn, prompts, advantage_fn, hw6["grpo_token_loss"], iters=it,
                                               n_prompts=n_p, group=grp, seed=seed, length_norm=length_norm,
                                               beta=BUDGET["KL_BETA"], proxy_fn=proxy_fn)
             record(f"{variant} ({target})", policy, time.perf_counter() - t0, log)
@@ -129,9 +130,9 @@ def run_seed(seed: int, all_variants: bool = False) -> dict:
     kto_des = torch.cat([torch.ones(half, dtype=torch.bool), torch.zeros(len(tr) - half, dtype=torch.bool)])
     offline = {
         "DPO": lambda: train_dpo(sft, chosen[tr], rejected[tr], p, b, BUDGET["OFFLINE_STEPS"], seed=seed),
-        "IPO": lambda: L.pairwise_train(sft, chosen[tr], rejected[tr], p, lambda pc, pr, rc, rr:
+        "IPO": lambda: GT.pairwise_train(sft, chosen[tr], rejected[tr], p, lambda pc, pr, rc, rr:
                                         hw6["ipo_loss"](pc, pr, rc, rr, b), BUDGET["OFFLINE_STEPS"], seed=seed),
-        "KTO": lambda: L.kto_train(sft, kto_tokens, kto_des, p, hw6["kto_loss"], beta=b, steps=BUDGET["OFFLINE_STEPS"],
+        "KTO": lambda: GT.kto_train(sft, kto_tokens, kto_des, p, hw6["kto_loss"], beta=b, steps=BUDGET["OFFLINE_STEPS"],
                                    seed=seed),
     }
     for name, train in offline.items():

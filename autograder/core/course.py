@@ -102,30 +102,122 @@ def release_paths(root: Path) -> tuple[list[Path], list[Path]]:
     return shown, masked
 
 
-def release_notebooks(assignments: Path) -> list[Path]:
+def release_notebooks(assignments: Path, only: str | None = None) -> list[Path]:
     """The release notebooks in an ``assignments/`` folder (``<id>/<id>.ipynb``): all the sandbox shows of it,
     so a student's notebook an instructor keeps there (nbgrader's ``submitted/``, or beside the release
-    notebook), or results written there, never show."""
-    return sorted(p for p in assignments.glob("*/*.ipynb") if p.stem == p.parent.name and p.is_file())
+    notebook), or results written there, never show. With ``only``, that assignment's alone."""
+    return sorted(p for p in assignments.glob("*/*.ipynb")
+                  if p.stem == p.parent.name and p.is_file() and only in (None, p.stem))
 
 
-def sandbox_view(hide: "Iterable[Path]" = ()) -> "View":
+LIBRARY = "rlcourse"
+"""The student library: the one package of the release that a notebook, and so a stub, imports."""
+
+
+def imported_names(source: str, package: str | None = None) -> set[str]:
+    """Every module a Python source may import, read from its AST (imports inside functions included):
+    ``import a.b`` gives ``a`` and ``a.b``; ``from a import b`` gives ``a`` and ``a.b`` (``b`` may be a
+    module); a relative import is resolved against ``package``. Unparsable source imports nothing."""
+    import ast
+
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return set()
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                names.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                if package is None:
+                    continue
+                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, *([base] if base else [])])
+            parts = base.split(".")
+            names.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names
+
+
+def _library_file(root: Path, module: str) -> Path | None:
+    """The source file of library module ``module`` under ``root`` (``rlcourse.lm`` -> ``rlcourse/lm.py``)."""
+    parts = module.split(".")
+    if parts[0] != LIBRARY:
+        return None
+    for path in (root.joinpath(*parts).with_suffix(".py"), root.joinpath(*parts, "__init__.py")):
+        if path.is_file():
+            return path
+    return None
+
+
+def library_modules(assignment: str, root: Path | None = None) -> set[Path]:
+    """The library files grading ``assignment`` needs: the modules that its trusted cells (the release's
+    parameters and setup), its reference's stub cells and its suite's sandbox helpers import, and all that
+    those import in turn (each module's imports read from its AST, those inside functions too).
+
+    A worker grading ``assignment`` sees these and no other module of the library (:func:`library_masks`):
+    a helper written for another assignment (a fitter, a planner, a loss) can then never answer one of this
+    assignment's stubs, under its own name or behind an adapter. A student's stub may import anything its
+    reference imports, so a correct stub never misses a module.
+    """
+    from autograder.core.notebook import read_notebook, release_plan
+
+    root = Path(root or REPO)
+    sources = [c.source for c in release_plan(read_notebook(release_notebook(assignment))) if c.kind != "stub"]
+    sources += [c.source for c in release_plan(read_notebook(solution_notebook(assignment))) if c.kind == "stub"]
+    sources += [p.read_text() for p in (common_helpers(), suite_dir(assignment) / "sandbox_helpers.py") if p.is_file()]
+    wanted = {n for s in sources for n in imported_names(s) if n.split(".")[0] == LIBRARY}
+    found: dict[str, Path] = {}
+    while wanted:
+        module = wanted.pop()
+        path = _library_file(root, module)
+        if path is None or module in found:
+            continue
+        found[module] = path
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        wanted |= {n for n in imported_names(path.read_text(), package) if n.split(".")[0] == LIBRARY} - set(found)
+    init = root / LIBRARY / "__init__.py"
+    return {*found.values(), *([init] if init.is_file() else [])}
+
+
+def library_masks(assignment: str, root: Path | None = None) -> list[Path]:
+    """What a worker grading ``assignment`` must not read of the library at ``root``: every module outside
+    :func:`library_modules`, and every compiled cache (``__pycache__``), which would hold a masked module's
+    code (a worker compiles what it imports from source, in memory)."""
+    root = Path(root or REPO)
+    needed = library_modules(assignment, root)
+    files = sorted((root / LIBRARY).rglob("*.py")) if (root / LIBRARY).is_dir() else []
+    caches = sorted(p for p in (root / LIBRARY).rglob("__pycache__") if p.is_dir()) if (root / LIBRARY).is_dir() else []
+    return [*(p for p in files if p not in needed and "__pycache__" not in p.parts), *caches]
+
+
+def sandbox_view(hide: "Iterable[Path]" = (), assignment: str | None = None) -> "View":
     """What a sandbox worker sees: the student release of this course and of the installed library,
     and the Python environment; read as the owner of the installed checkout.
 
     ``hide`` are the grading's own inputs and outputs (a folder of submissions, the notebook being
     graded and those beside it, an output folder): where an instructor keeps one inside a released
     folder (nbgrader's ``submitted/`` under ``assignments/``, say), it is masked like the instructor tools.
+    With ``assignment``, the view holds that assignment's release notebook only (not another's, whose given
+    cells are another assignment's helpers) and, of the library, only what grading it needs
+    (:func:`library_masks`); the masked modules are secret too, for a worker without namespaces.
     """
     import sys
 
     from autograder.sandbox.config import View
 
-    shown, masked = [], []
+    shown, masked, withheld = [], [], []
     for root in dict.fromkeys([INSTALLED, REPO]):
         s, m = release_paths(Path(root))
-        shown += [n for p in s for n in (release_notebooks(p) if p.name == "assignments" else [p])]
+        shown += [n for p in s for n in (release_notebooks(p, assignment) if p.name == "assignments" else [p])]
         masked += m
+        if assignment is not None:
+            withheld += library_masks(assignment, Path(root))
+    masked += withheld
     python = [Path(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix)]
     paths = [*shown, *python, *(p.resolve() for p in (*shown, *python))]
     paths = sorted({str(p) for p in paths})
@@ -148,13 +240,16 @@ def instructor_paths(root: Path) -> list[Path]:
     return [p for p in (*(root / f for f in INSTRUCTOR_FOLDERS), *release_paths(root)[1]) if os.path.lexists(p)]
 
 
-def set_container_permissions(root: Path = REPO, environment: bool = True) -> list[str]:
+def set_container_permissions(root: Path = REPO, environment: bool = True, assignment: str | None = None) -> list[str]:
     """Make the file modes the only wall a worker needs where it runs without namespaces as a uid of its own
     (isolation "none" as root, the Gradescope and PrairieLearn containers): the instructor paths readable by
     their owner only, the release and the virtual environment readable by everyone, with every folder above
-    them searchable (a system Python, or any with ``environment`` false, is left as it is). Returns one line
-    per path changed. Meant for a grading container, run as the owner of the files (root, there): on a shared
-    machine it would widen the release and the virtual environment to every user."""
+    them searchable (a system Python, or any with ``environment`` false, is left as it is). With ``assignment``
+    (the one this container grades), the library modules and compiled caches grading it must not see
+    (:func:`library_masks`) are readable by their owner only too; a worker without namespaces refuses to
+    serve while they are not. Returns one line per path changed. Meant for a grading container, run as the
+    owner of the files (root, there): on a shared machine it would widen the release and the virtual
+    environment to every user."""
     import stat
     import sys
 
@@ -166,12 +261,13 @@ def set_container_permissions(root: Path = REPO, environment: bool = True) -> li
             os.chmod(path, mode)
             changed.append(f"{mode:o} {path}")
 
-    for secret in instructor_paths(root):
+    secrets = [*instructor_paths(root), *(library_masks(assignment, root) if assignment else ())]
+    for secret in secrets:
         for path in [secret, *(secret.rglob("*") if secret.is_dir() and not secret.is_symlink() else ())]:
             chmod(path, stat.S_IMODE(path.lstat().st_mode) & 0o700)
     shown = [n for p in release_paths(root)[0] for n in (release_notebooks(p) if p.name == "assignments" else [p])]
     shown += [Path(sys.prefix)] if environment and sys.prefix != sys.base_prefix else []
-    hidden = {str(p) for p in instructor_paths(root)}
+    hidden = {str(p) for p in secrets}
     for top in shown:
         for path in [top, *(top.rglob("*") if top.is_dir() else ())]:
             if any(str(path) == h or str(path).startswith(h + "/") for h in hidden):

@@ -266,7 +266,7 @@ class Grader:
         self.expected = [c.label for c in self.plan if c.kind == "stub"]
         self.manual = manual_cells(release)
         self.zygote = Zygote(imported_modules([c.source for c in self.plan if c.kind != "stub"]))
-        self.config = SpawnConfig(course.sandbox_view(hide), self.limits)
+        self.config = SpawnConfig(course.sandbox_view(hide, assignment), self.limits)
         try:
             self.reference_ns = build_reference(assignment)
         except Exception as err:  # noqa: BLE001 - a broken solution notebook is the course's bug

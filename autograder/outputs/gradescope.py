@@ -135,7 +135,7 @@ python3.11 -m venv .venv
 .venv/bin/python -m pip install --quiet -e .
 # Gradescope's containers refuse namespaces: the worker runs as a uid of its own, walled off the hidden
 # suites and solutions by their modes alone.
-.venv/bin/python -m autograder permissions
+.venv/bin/python -m autograder permissions --assignment {assignment}
 """
 
 RUN_AUTOGRADER = """\
@@ -157,9 +157,9 @@ def torch_requirement(pyproject: Path | None = None) -> str:
     return pins[0]
 
 
-def setup_script() -> str:
-    """``setup.sh`` of the bundle."""
-    return SETUP_SH.format(torch=torch_requirement(), index=CPU_TORCH_INDEX)
+def setup_script(assignment: str) -> str:
+    """``setup.sh`` of the bundle of ``assignment``."""
+    return SETUP_SH.format(torch=torch_requirement(), index=CPU_TORCH_INDEX, assignment=assignment)
 
 
 def build_bundle(assignment: str, out: Path | None = None, visibility: str = DEFAULT_VISIBILITY) -> Path:
@@ -178,7 +178,8 @@ def build_bundle(assignment: str, out: Path | None = None, visibility: str = DEF
 
     for name in ("pyproject.toml", "README.md"):
         members.append((repo / name, name))
-    add_tree(repo / "rlcourse", "rlcourse")
+    for path in sorted(course.library_modules(assignment)):  # the library grading it needs, and nothing else
+        members.append((path, path.relative_to(repo).as_posix()))
     for path in sorted((repo / "autograder").rglob("*.py")):
         if "suites" not in path.relative_to(repo / "autograder").parts and "__pycache__" not in path.parts:
             members.append((path, path.relative_to(repo).as_posix()))
@@ -192,7 +193,7 @@ def build_bundle(assignment: str, out: Path | None = None, visibility: str = DEF
     with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as bundle:
         for path, name in members:
             bundle.write(path, name)
-        for name, text in (("setup.sh", setup_script()),
+        for name, text in (("setup.sh", setup_script(assignment)),
                            ("run_autograder", RUN_AUTOGRADER.format(assignment=assignment, visibility=visibility))):
             info = zipfile.ZipInfo(name)
             info.external_attr = 0o755 << 16

@@ -52,6 +52,8 @@ cd "$install"
 # the hidden suite, the solution and the other grading folders readable by their owner only.
 chmod 700 "$grade/results" "$grade/student" 2>/dev/null
 .venv/bin/python -m autograder permissions --root "$RLCOURSE_REPO" --no-environment >/dev/null 2>&1
+# and of the kit's library, only the modules grading {assignment} needs stay readable by others
+.venv/bin/python -m autograder permissions --root "$install" --no-environment --assignment {assignment} >/dev/null 2>&1
 exec .venv/bin/python -m autograder prairielearn {assignment} --root "$grade"
 """
 

@@ -292,7 +292,8 @@ def check_file_modes(view: View, python: Iterable[str]) -> None:
     """[worker, no view, own uid] Refuse to serve unless the modes wall the grading off: no ``view.secret``
     path reachable, every exposed path readable (the course's folders entry by entry, the Python environments
     ``python`` at their top only). Raises :class:`IsolationError` naming the first problem and the fix."""
-    fix = "run `python -m autograder permissions` as root in the course checkout (docs/grading.md)"
+    fix = ("run `python -m autograder permissions --assignment ID` as root in the course checkout, ID the "
+           "assignment being graded (docs/grading.md)")
     reachable = [p for p in view.secret if _reachable(p)]
     if reachable:
         raise IsolationError(0, f"no namespaces here, and a worker of its own uid could read {reachable[0]} "

@@ -12,7 +12,7 @@ with ``rlcourse.group_rl.load_reward_model`` and ``load_dpo_policy``.
   ``--rm-steps`` batches of 64 pairs), with the mean and standard deviation of its raw scores on those
   pairs' sequences (``shift``, ``scale``) and its accuracy on the held-out pairs in the metadata.
 - ``datasets/hw6/dpo_beta0.1.pt``: DPO from the SFT model on the same pairs, at beta ``--beta``,
-  ``--dpo-steps`` batches of 64, with hw6's given ``rlcourse.lm_training.pairwise_train``, so that
+  ``--dpo-steps`` batches of 64, with hw6's given ``rlcourse.group_training.pairwise_train``, so that
   it is trained exactly as the notebook trains IPO.
 
 With the defaults (hw6's full budget) and seed 0 both equal seed 0 of ``bench/bench_hw6_group_rl.py``,
@@ -34,7 +34,7 @@ from rlcourse import reviews as R
 from rlcourse.checkpoint import save_model
 from rlcourse.lm import ScalarHeadLM, TinyLM, load_sft, save_lm
 from rlcourse import lm_training
-from rlcourse.lm_training import pairwise_train
+from rlcourse.group_training import pairwise_train
 
 
 def fit_reward_model(sft: TinyLM, chosen: torch.Tensor, rejected: torch.Tensor, steps: int, seed: int,

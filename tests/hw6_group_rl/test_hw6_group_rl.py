@@ -10,6 +10,7 @@ import torch
 
 from conftest import REPO
 from rlcourse import group_rl as G
+from rlcourse import group_training as GT
 from rlcourse import lm_training as L
 from rlcourse.lm import LMConfig, TinyLM
 
@@ -154,7 +155,7 @@ def test_the_notebook_with_the_shipped_models_is_the_benchmarks_seed_0():
         assert all(math.isclose(e[k], seed0[name][k], abs_tol=1e-5) for k in ("gold", "proxy", "kl")), (name, e)
     prompts = torch.as_tensor(prefs["chosen"])[np.flatnonzero(~prefs["test"])[:3000], :prefs["prompt_len"]]
     for name, reward_fn in (("GRPO (gold)", L.gold_fn), ("GRPO (proxy)", proxy_fn)):
-        _, log = L.critic_free_train(sft, reward_fn, prompts, ns["group_advantages"], ns["grpo_token_loss"], iters=2,
+        _, log = GT.critic_free_train(sft, reward_fn, prompts, ns["group_advantages"], ns["grpo_token_loss"], iters=2,
                                      n_prompts=8, group=8, seed=0, beta=0.0, proxy_fn=proxy_fn)
         for k in ("gold", "proxy", "kl"):
             assert np.allclose(log[k], seed0[name]["curve"][k][:2], atol=1e-6), (name, k, log[k])

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from autograder.core import course
 from autograder.core.grader import Grader
 from autograder.core.results import GradeResult, StubResult
 from autograder.core.results import TestOutcome as Outcome
@@ -65,7 +66,7 @@ def test_the_top_level_output_states_the_isolation_level(level):
 
 
 def test_setup_installs_torch_from_the_cpu_index_first():
-    setup = gradescope.setup_script()
+    setup = gradescope.setup_script("hw0_setup")
     pin = gradescope.torch_requirement()
     assert re.fullmatch(r"torch==\d+\.\d+\.\d+", pin)
     line = f"pip install --quiet {pin} --index-url https://download.pytorch.org/whl/cpu"
@@ -131,6 +132,9 @@ def test_bundle_grades_a_submission_in_a_gradescope_layout(tmp_path):
     assert {"setup.sh", "run_autograder", "pyproject.toml"} <= set(names)
     assert any(n.startswith("autograder/suites/hw0_setup/") for n in names)
     assert not any(n.startswith("autograder/samples/") or "suites/hw1" in n for n in names)
+    library = {n for n in names if n.startswith("rlcourse/")}  # what grading hw0 needs of the library, no more
+    assert library == {f"rlcourse/{p.name}" for p in course.library_modules("hw0_setup")}, library
+    assert "rlcourse/rollouts.py" in library and "rlcourse/feedback_spectrum.py" not in library
 
     root = tmp_path / "autograder"
     source = _unpack(bundle, root)
@@ -170,8 +174,9 @@ def test_a_container_without_namespaces_says_its_isolation_is_partial(tmp_path):
     root = tmp_path / "autograder"
     source = _unpack(build_bundle("hw0_setup", tmp_path / "hw0_setup.zip"), root)
     shutil.copy(REPO / "autograder/samples/hw0_setup/partial.ipynb", root / "submission" / "my_work.ipynb")
-    assert "\n.venv/bin/python -m autograder permissions\n" in (source / "setup.sh").read_text()
-    subprocess.run([sys.executable, "-m", "autograder", "permissions", "--no-environment"], cwd=source, check=True,
+    assert "\n.venv/bin/python -m autograder permissions --assignment hw0_setup\n" in (source / "setup.sh").read_text()
+    subprocess.run([sys.executable, "-m", "autograder", "permissions", "--no-environment", "--assignment", "hw0_setup"],
+                   cwd=source, check=True,
                    env=dict(os.environ, PYTHONPATH=str(source), RLCOURSE_REPO=str(source)), capture_output=True)
     done, _ = _run(source, root, ["setpriv", f"--bounding-set=-all,{DOCKER_DEFAULT_CAPABILITIES}", "--inh-caps=-all",
                                   "--"])

@@ -18,6 +18,7 @@ import torch
 
 from conftest import REPO
 from rlcourse import group_rl as G
+from rlcourse import group_training as GT
 from rlcourse import lm_training as L
 from rlcourse import reviews as R
 from rlcourse.lm import LMConfig, TinyLM, completion_mask
@@ -149,19 +150,19 @@ def test_critic_free_train_raises_the_reward_with_each_variant(hw6, variant):
     advantage_fn, length_norm = {"GRPO": (hw6["group_advantages"], True), "RLOO": (hw6["rloo_advantages"], True),
                                  "Dr. GRPO": (lambda r: hw6["group_advantages"](r, scale=False), False)}[variant]
     lr = 3e-3 if variant == "GRPO" else 3e-2   # Dr. GRPO and RLOO do not divide by the groups' small spread
-    policy, log = L.critic_free_train(sft, low_ids, x, advantage_fn, hw6["grpo_token_loss"], iters=12, n_prompts=4,
+    policy, log = GT.critic_free_train(sft, low_ids, x, advantage_fn, hw6["grpo_token_loss"], iters=12, n_prompts=4,
                                       group=8, seed=0, length_norm=length_norm, lr=lr, proxy_fn=L.gold_fn)
     assert set(log) == {"reward", "gold", "proxy", "kl", "equal_groups", "seconds"}
     assert np.allclose(log["proxy"], log["gold"]) and log["kl"][0] == 0.0
     assert log["reward"][-3:].mean() > log["reward"][:3].mean() + 0.05, log["reward"]
-    _, plain = L.critic_free_train(sft, low_ids, x, advantage_fn, hw6["grpo_token_loss"], iters=1, n_prompts=2,
+    _, plain = GT.critic_free_train(sft, low_ids, x, advantage_fn, hw6["grpo_token_loss"], iters=1, n_prompts=2,
                                    group=4, seed=0)
     assert np.isnan(plain["proxy"]).all(), "without a proxy_fn the proxy column is NaN"
 
 
 def test_critic_free_train_steps_on_the_given_loss_only(hw6):
     sft = tiny_lm()
-    frozen, _ = L.critic_free_train(sft, low_ids, prompts(4), hw6["group_advantages"], lambda *a: 0.0 * a[0].sum(),
+    frozen, _ = GT.critic_free_train(sft, low_ids, prompts(4), hw6["group_advantages"], lambda *a: 0.0 * a[0].sum(),
                                     iters=2, n_prompts=2, group=4, seed=0)
     assert unchanged(frozen, sft)
 
@@ -171,16 +172,16 @@ def test_pairwise_and_kto_train_learn_with_the_reference_losses(hw6):
     x = torch.as_tensor(R.sample_corpus(64, seed=3)[0])
     chosen, rejected = x[:32], x[32:]
     margin = lambda m: (G.completion_log_prob_sums(m, chosen, P) - G.completion_log_prob_sums(m, rejected, P))  # noqa: E731
-    ipo = L.pairwise_train(sft, chosen, rejected, P, lambda pc, pr, rc, rr: hw6["ipo_loss"](pc, pr, rc, rr, 0.5),
+    ipo = GT.pairwise_train(sft, chosen, rejected, P, lambda pc, pr, rc, rr: hw6["ipo_loss"](pc, pr, rc, rr, 0.5),
                            steps=40, seed=0, batch=16, lr=3e-3)
     with torch.no_grad():
         h = margin(ipo) - margin(sft)
     assert float(h.mean()) > 0.3, "IPO's margin should move towards its target 1 / (2 beta) = 1"
     desirable = torch.arange(64) < 32
-    kto = L.kto_train(sft, x, desirable, P, hw6["kto_loss"], beta=0.5, steps=40, seed=0, batch=16, lr=3e-3)
+    kto = GT.kto_train(sft, x, desirable, P, hw6["kto_loss"], beta=0.5, steps=40, seed=0, batch=16, lr=3e-3)
     with torch.no_grad():
         r = G.completion_log_prob_sums(kto, x, P) - G.completion_log_prob_sums(sft, x, P)
     assert float(r[desirable].mean()) > float(r[~desirable].mean()) + 0.3
     zero = lambda *a: 0.0 * a[0].sum()  # noqa: E731
-    assert unchanged(L.pairwise_train(sft, chosen, rejected, P, zero, steps=2, seed=0, batch=8), sft)
-    assert unchanged(L.kto_train(sft, x, desirable, P, zero, beta=0.5, steps=2, seed=0, batch=8), sft)
+    assert unchanged(GT.pairwise_train(sft, chosen, rejected, P, zero, steps=2, seed=0, batch=8), sft)
+    assert unchanged(GT.kto_train(sft, x, desirable, P, zero, beta=0.5, steps=2, seed=0, batch=8), sft)

@@ -68,11 +68,15 @@ def test_a_course_walled_by_its_modes_grades_and_one_that_is_not_refuses(course,
     assert not (tmp_path / "open" / "result.json").exists() or \
         json.loads((tmp_path / "open" / "result.json").read_text())["error"]
 
-    done = subprocess.run([sys.executable, "-m", "autograder", "permissions", "--root", str(course), "--no-environment"],
+    done = subprocess.run([sys.executable, "-m", "autograder", "permissions", "--root", str(course), "--no-environment",
+                           "--assignment", "hw0_setup"],
                           env={**os.environ, "PYTHONPATH": str(course), "RLCOURSE_REPO": str(course)},
                           capture_output=True, text=True, check=True)
     assert "file modes changed" in done.stdout
     assert stat.S_IMODE(os.stat(course / "solutions").st_mode) & 0o077 == 0
+    # of the library, what grading hw0 does not need is its owner's only (another assignment's helpers)
+    assert stat.S_IMODE(os.stat(course / "rlcourse/feedback_spectrum.py").st_mode) & 0o077 == 0
+    assert stat.S_IMODE(os.stat(course / "rlcourse/rollouts.py").st_mode) & 0o044 == 0o044
     graded = _grade(course, tmp_path / "walled")
     assert graded.returncode == 0, graded.stderr[-2000:]
     result = json.loads((tmp_path / "walled" / "result.json").read_text())
