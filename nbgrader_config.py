@@ -31,3 +31,10 @@ c.LatePenalty.grace_minutes = 0.0
 # Generate only from formgrader: `make assignments` runs `nbgrader generate_assignment` itself.
 c.NbGraderAPI.GenerateAssignment.exporter_class = "autograder.outputs.formgrader_guard.GenerateRefused"
 c.Autograde.exporter_class = "autograder.outputs.formgrader_guard.AutogradeRefused"
+
+# Validate (the notebook toolbar's button, and `nbgrader validate`) runs every code cell at the FAST budget and
+# fails on any cell that raises or writes to stderr: the public checks, not only nbgrader's graded test cells
+# (this course has none), decide (rlcourse/student_lab.py). The student release ships the same settings.
+from rlcourse.student_lab import configure_validate  # noqa: E402
+
+configure_validate(c)

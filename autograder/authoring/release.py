@@ -91,17 +91,35 @@ This folder holds everything you need for the course:
 
 ## Set up (Python 3.11)
 
-    python3 -m venv .venv && .venv/bin/pip install -e .
+    python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/python -m rlcourse.student_lab
     .venv/bin/jupyter lab
 
 Run both from this folder: JupyterLab then opens with the whole course in its file browser (every
 assignment and the lectures); start with `assignments/hw0_setup/hw0_setup.ipynb`. Activating the
 environment (`source .venv/bin/activate`) puts `jupyter` and `python` on your `PATH` for any command
-the lectures show.
+the lectures show. (`python -m rlcourse.student_lab` hides nbgrader's instructor menus, which you do
+not need.)
+
+**Validate**, on each notebook's toolbar, runs the whole notebook at its `FAST` budget (about a
+minute) and lists every cell that raised or printed a warning, with its message: each public check
+that fails and each stub that still raises `NotImplementedError`. It says "Success" only when every
+cell ran cleanly. The grader's hidden tests check more than the public checks do.
 
 Each assignment runs on a laptop CPU. Fill in the cells that say `raise NotImplementedError()`,
 run the public check under each, and submit the `.ipynb` file as your course tells you.
 Set `FAST = True` in a notebook's parameters cell for a quick dry run of everything.
+"""
+
+
+STUDENT_NBGRADER_CONFIG = """\
+\"\"\"nbgrader's settings for the notebook toolbar's Validate button (read from the folder JupyterLab starts in).
+
+Validate runs the notebook at its FAST budget and reports every cell that raises or writes to stderr:
+the public checks decide, not only nbgrader's graded cells (rlcourse/student_lab.py).
+\"\"\"
+from rlcourse.student_lab import configure_validate
+
+configure_validate(get_config())  # noqa: F821  (injected by nbgrader)
 """
 
 
@@ -127,6 +145,7 @@ def build_student_release(out: Path) -> Path:
     for source in shown:
         shutil.copytree(source, out / source.name, ignore=ignore)
     (out / "README.md").write_text(STUDENT_README)
+    (out / "nbgrader_config.py").write_text(STUDENT_NBGRADER_CONFIG)
     (out / "pyproject.toml").write_text(_student_pyproject((course.REPO / "pyproject.toml").read_text()))
     problems = find_leaks(out)
     if problems:
