@@ -44,10 +44,10 @@ HIDDEN_SERVER_EXTENSIONS = (
 """The server halves of those plugins (Create Assignment has none)."""
 
 VALIDATE_FAILED = (
-    "{num_failed} CELL(S) RAISED AN ERROR OR WROTE TO STDERR when the notebook ran at its FAST "
-    "budget. Each is shown below: a public check that fails, a stub that still raises "
-    "NotImplementedError, or a warning. Fix them before you submit; the grader's hidden tests are "
-    "stricter than the public checks.\n"
+    "VALIDATION FAILED ON {num_failed} CELL(S) when the notebook ran at its FAST budget. Each is shown "
+    "below: a public check that fails, a stub that still raises NotImplementedError, a warning, or a "
+    "written answer left empty. Fix them before you submit; the grader's hidden tests are stricter "
+    "than the public checks.\n"
 )
 
 
