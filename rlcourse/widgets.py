@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import contextlib
 import functools
+from concurrent.futures import Future, ThreadPoolExecutor
 import sys
 import tempfile
 import traceback
@@ -115,6 +116,11 @@ class PreferenceAnnotator:
     distinct segments, ``first`` and ``second`` the two ratings of each) returns the status line,
     for instance the test–retest consistency of the ratings against the comparisons. Without
     ``rate`` the widget behaves as it always has.
+
+    Rendering a pair takes seconds, so the next one is rendered in a background thread while the
+    current one is on screen: after the first, a click shows the next pair at once. One thread does
+    all the rendering (MuJoCo's GL contexts stay in it); an error there is raised, and shown, when
+    the click that needs the clip comes.
     """
 
     CHOICES = (("left is better", 1.0), ("can't tell", 0.5), ("right is better", 0.0))
@@ -148,6 +154,9 @@ class PreferenceAnnotator:
         self.choice_box, self.scale_box = widgets.HBox(self.buttons), widgets.HBox(self.scale_buttons)
         self.scale_box.layout.display = "none"
         self.box = widgets.VBox([self.status, self.clip, self.choice_box, self.scale_box, self.output])
+        self._renderer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="annotator-render")
+        self._ahead: dict[tuple[str, int], Future] = {}  # clips rendered, or being rendered, ahead of the click
+        self._on_screen = -1  # the pair the buttons answer
 
     @property
     def n_labels(self) -> int:
@@ -158,15 +167,35 @@ class PreferenceAnnotator:
         self._show(0)
         return self.box
 
-    def _show(self, k: int) -> None:
-        left, right = (self.render(self.obs[i]) for i in self.pairs[k])
+    def _html(self, kind: str, k: int) -> str:
+        """The ``<video>`` of pair ``k`` (``kind`` "pair") or of the ``k``-th clip to rate ("clip")."""
         from rlcourse.video import side_by_side
 
-        self.clip.value = video_html(side_by_side([left, right]))
+        shown = self.pairs[k] if kind == "pair" else [self.clips[self.rating_order[k]]]
+        return video_html(side_by_side([self.render(self.obs[i]) for i in shown]))
+
+    def _render_ahead(self, kind: str, k: int) -> None:
+        """Start rendering ``(kind, k)`` in the background, if it exists and is not under way."""
+        if k < (self.n_labels if kind == "pair" else self.n_ratings) and (kind, k) not in self._ahead:
+            self._ahead[kind, k] = self._renderer.submit(self._html, kind, k)
+
+    def _take(self, kind: str, k: int) -> str:
+        """The clip ``(kind, k)``: rendered ahead if it was (else now), then the next one started."""
+        self._render_ahead(kind, k)
+        try:
+            return self._ahead.pop((kind, k)).result()
+        finally:
+            self._render_ahead(kind, k + 1)
+            if kind == "pair" and k + 1 == self.n_labels and self.rate is not None:
+                self._render_ahead("clip", 0)
+
+    def _show(self, k: int) -> None:
+        self.clip.value = self._take("pair", k)
+        self._on_screen = k
         self.status.value = f"pair {k + 1} of {self.n_labels}: which hops better?"
 
     def _answer(self, mu: float, _button=None) -> None:
-        if len(self.labels) < self.n_labels:
+        if len(self.labels) == self._on_screen:  # not after an error, when the click only tries again
             self.labels.append(mu)
         k = len(self.labels)
         if k < self.n_labels:
@@ -192,9 +221,7 @@ class PreferenceAnnotator:
         return len(self.rating_order)
 
     def _show_clip(self, k: int) -> None:
-        from rlcourse.video import side_by_side
-
-        self.clip.value = video_html(side_by_side([self.render(self.obs[self.clips[self.rating_order[k]]])]))
+        self.clip.value = self._take("clip", k)
         self.status.value = f"clip {k + 1} of {self.n_ratings}: how well does it hop, from 1 (worst) to 10 (best)?"
 
     def _rate(self, value: int, _button=None) -> None:

@@ -51,11 +51,13 @@ def test_video_html_is_a_self_contained_muted_video():
     assert html.startswith("<video autoplay loop muted") and 'src="data:video/mp4;base64,' in html
 
 
-def test_annotator_advances_shows_progress_and_reports_an_unfinished_stub_in_place():
-    seen = []  # (status, buttons disabled) while each pair renders
+def test_annotator_renders_the_next_pair_ahead_and_reports_an_unfinished_stub_in_place():
+    import threading
+
+    rendered = []  # (segment, thread, clicks so far) of every render
 
     def render(segment):
-        seen.append((annotator.status.value, all(b.disabled for b in annotator.buttons)))
+        rendered.append((int(segment[0, 0]), threading.current_thread().name, len(annotator.labels)))
         return np.zeros((3, 16, 16, 3), dtype=np.uint8)
 
     trained = []
@@ -68,21 +70,45 @@ def test_annotator_advances_shows_progress_and_reports_an_unfinished_stub_in_pla
     def report(model, labels):
         return f"done with {model} on {labels.tolist()}"
 
-    obs = np.zeros((6, 3, 11), dtype=np.float32)
+    obs = np.arange(6, dtype=np.float32)[:, None, None] * np.ones((6, 3, 11), dtype=np.float32)  # segment i holds i
     annotator = PreferenceAnnotator(obs, np.array([[0, 1], [2, 3], [4, 5]]), train, report, render=render)
     annotator.start()
     assert annotator.status.value == "pair 1 of 3: which hops better?" and "<video" in annotator.clip.value
+    annotator._ahead["pair", 1].result()  # pair 2 is rendered while pair 1 is on screen, before any click
+    assert [(s, clicks) for s, _, clicks in rendered] == [(0, 0), (1, 0), (2, 0), (3, 0)], rendered
     left, tie, right = annotator.buttons
     left.click()
     assert annotator.status.value == "pair 2 of 3: which hops better?"
-    assert seen[-2:] == [("rendering pair 2 of 3...", True)] * 2  # both clips of the pair, buttons off
     assert not any(b.disabled for b in annotator.buttons)
     tie.click()
     right.click()  # the last answer: train_reward_model raises
     assert annotator.labels == [1.0, 0.5, 0.0]
+    assert {thread for _, thread, _ in rendered} == {"annotator-render_0"}, rendered  # one thread renders all
+    assert sorted(s for s, _, _ in rendered) == [0, 1, 2, 3, 4, 5]  # each pair once
     assert stderr_text(annotator.output).startswith("`train_reward_model` is not implemented yet")
     assert annotator.status.value.startswith("stopped") and not any(b.disabled for b in annotator.buttons)
     trained.append(True)  # the student fills the stub in and clicks again
     left.click()
     assert annotator.labels == [1.0, 0.5, 0.0] and annotator.output.outputs == ()
     assert annotator.status.value == "done with model on [1.0, 0.5, 0.0]"
+
+
+def test_annotator_shows_an_error_from_the_background_render_on_the_click_that_needs_it():
+    calls = []
+
+    def render(segment):
+        calls.append(int(segment[0, 0]))
+        if int(segment[0, 0]) == 2 and calls.count(2) == 1:
+            raise RuntimeError("no GL context")
+        return np.zeros((3, 16, 16, 3), dtype=np.uint8)
+
+    obs = np.arange(4, dtype=np.float32)[:, None, None] * np.ones((4, 3, 11), dtype=np.float32)
+    annotator = PreferenceAnnotator(obs, np.array([[0, 1], [2, 3]]), lambda p, l: None, lambda m, l: "done",
+                                    render=render)
+    annotator.start()
+    annotator.buttons[0].click()
+    assert "RuntimeError: no GL context" in stderr_text(annotator.output)
+    assert annotator.status.value.startswith("stopped") and not any(b.disabled for b in annotator.buttons)
+    annotator.output.outputs = ()
+    annotator.buttons[0].click()  # tried again: rendered now
+    assert annotator.status.value == "pair 2 of 2: which hops better?" and annotator.labels == [1.0]
