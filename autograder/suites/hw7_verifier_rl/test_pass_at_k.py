@@ -76,7 +76,9 @@ def test_unbiased_over_binomial_counts(student, rng):
 
 @stub("pass_at_k", points=1, hint="k must satisfy 1 <= k <= n for every problem: raise ValueError otherwise.")
 def test_bad_k_raises(student):
-    """k = 0 and k > some n raise ValueError"""
+    """k = 0 and k > some n raise ValueError, and only they: k = n of the smallest n does not"""
     for n, k in ((np.array([10, 4]), 5), (np.array([10, 12]), 0)):
         outcome = raised(student.pass_at_k, n, np.zeros(2, dtype=int), k)
         assert outcome == "ValueError", f"k = {k} with n = {n.tolist()} should raise ValueError, got {outcome}"
+    outcome = raised(student.pass_at_k, np.array([10, 4]), np.array([3, 1]), 4)  # a stub that always raises earns nothing
+    assert outcome == "no error", f"k = 4 with n = [10, 4] is allowed (1 <= k <= n), but it raised {outcome}"
