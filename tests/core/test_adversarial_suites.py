@@ -57,6 +57,28 @@ def test_trivial_answers_and_seed_search_earn_nothing(assignment, open_tmp):
     assert not earned, f"trivial answers earned points on {assignment}: {earned}"
 
 
+def test_stubs_that_always_raise_earn_nothing(open_tmp):
+    """A stub that raises the error its contract asks for on bad input, whatever it is given, is a constant answer
+    too: every test that checks a refusal also makes a call that must not raise. (The untouched stub's
+    NotImplementedError is the samples' ``untouched``.)"""
+    error = "ValueError"
+    earned = {}
+    for assignment in gradable_assignments():
+        stubs = {name: (f"class {name}:\n    def __init__(self, *args, **kwargs):\n        raise {error}('no')\n"
+                        if name[:1].isupper() else f"def {name}(*args, **kwargs):\n    raise {error}('no')\n")
+                 for name in course.stub_names(assignment)}
+        path = open_tmp / f"raises_{assignment}.ipynb"
+        nbformat.write(_with_stubs(assignment, stubs), str(path))
+        grader = Grader(assignment)
+        try:
+            result = grader.grade(path)
+        finally:
+            grader.close()
+        assert result.has_score, result.error
+        earned.update({f"{assignment}.{s.name}": [t.name for t in s.tests if t.passed] for s in result.stubs if s.score})
+    assert not earned, f"stubs that always raise {error} earned points: {earned}"
+
+
 def _discounted(rewards, gamma):
     out, running = np.zeros_like(rewards), np.zeros(rewards.shape[0])
     for t in reversed(range(rewards.shape[1])):
