@@ -26,3 +26,15 @@ def test_site_builds_cleanly_offline(tmp_path):
                            text=True, timeout=600)
     assert check.returncode == 0, check.stdout[-3000:] + check.stderr[-2000:]
     assert "0 math errors, 0 remote resources" in check.stdout
+    # every chapter ends with its assignment's notebook, downloadable from the site
+    import re
+
+    import nbformat
+
+    for chapter in sorted((REPO / "lectures").glob("0*.md")):
+        page = (html / f"{chapter.stem}.html").read_text(encoding="utf-8")
+        links = re.findall(r'<a class="reference download internal" download="" href="(_downloads/[^"]+\.ipynb)"', page)
+        assert links, f"{chapter.name}: no link to its assignment's notebook on the site"
+        for link in links:
+            nb = nbformat.read(html / link, as_version=4)
+            assert any(c.metadata.get("nbgrader", {}).get("solution") for c in nb.cells), f"{link} is not a student notebook"
