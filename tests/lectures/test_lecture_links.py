@@ -160,7 +160,7 @@ def test_bad_digest_is_refused():
 
 NOTEBOOKS = sorted((ll.REPO / "solutions").glob("*/*.ipynb")) + sorted((ll.REPO / "assignments").glob("*/*.ipynb"))
 # Assignments whose notebooks do not point into the notes yet, each to be removed by the commit that adds links.
-UNLINKED: set[str] = {"hw1b_multimodal", "hw4_rlhf_dpo"}
+UNLINKED: set[str] = set()
 
 
 def test_every_notebook_link_into_the_notes_names_a_page_and_a_label_that_exist():
