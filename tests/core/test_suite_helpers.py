@@ -51,11 +51,26 @@ def _suite_helpers() -> list[Path]:
     return sorted(SUITES.glob("*/sandbox_helpers.py"))
 
 
+def _catches(source: str) -> list[int]:
+    """Lines of ``source`` that catch an exception: an ``except`` clause, or ``contextlib.suppress``. A ``try`` with
+    only a ``finally`` (which restores state and lets the error through) catches nothing."""
+    tree = ast.parse(source)
+    handlers = [node.lineno for node in ast.walk(tree) if isinstance(node, (ast.Try, ast.TryStar)) and node.handlers]
+    suppress = [node.lineno for node in ast.walk(tree) if isinstance(node, ast.Attribute) and node.attr == "suppress"]
+    return sorted(handlers + suppress)
+
+
 @pytest.mark.parametrize("path", [COMMON, *_suite_helpers()], ids=lambda p: p.parent.name if p != COMMON else "common")
 def test_helpers_never_catch_the_submissions_errors(path):
     """A helper that catches an exception would report a verdict ("it raised ValueError") from the sandbox."""
-    tries = [node.lineno for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.Try)]
-    assert tries == [], f"{path.name} catches exceptions at lines {tries}: let them reach the test"
+    lines = _catches(path.read_text())
+    assert lines == [], f"{path.name} catches exceptions at lines {lines}: let them reach the test"
+
+
+def test_the_catch_check_tells_a_handler_from_a_finally():
+    assert _catches("try:\n    f()\nexcept ValueError:\n    pass\n") == [1]
+    assert _catches("import contextlib\nwith contextlib.suppress(Exception):\n    f()\n") == [2]
+    assert _catches("try:\n    f()\nfinally:\n    g()\n") == []
 
 
 def _top_level_names(source: str) -> set[str]:
