@@ -1,6 +1,7 @@
 """Where an assignment's pieces live in this repository (or in the Gradescope bundle built from it)."""
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 from typing import Iterable
@@ -190,6 +191,9 @@ def library_masks(assignment: str, root: Path | None = None) -> list[Path]:
     code (a worker compiles what it imports from source, in memory)."""
     root = Path(root or REPO)
     needed = library_modules(assignment, root)
+    if (root / LIBRARY).is_dir():  # a cache the grader's own imports make later would not be masked: make it now
+        with contextlib.suppress(OSError):
+            (root / LIBRARY / "__pycache__").mkdir(exist_ok=True)
     files = sorted((root / LIBRARY).rglob("*.py")) if (root / LIBRARY).is_dir() else []
     caches = sorted(p for p in (root / LIBRARY).rglob("__pycache__") if p.is_dir()) if (root / LIBRARY).is_dir() else []
     return [*(p for p in files if p not in needed and "__pycache__" not in p.parts), *caches]
