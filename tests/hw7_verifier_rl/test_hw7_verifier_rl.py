@@ -151,3 +151,20 @@ def test_the_recorded_benchmark_has_every_stage_and_three_seeds():
         for row in per_seed.values():
             assert row["eval_samples"][0] == 0 and row["eval_samples"][-1] == row["samples"][-1]
             assert all(0 <= x <= 1 for x in row["equal_groups"])
+
+
+def test_the_notebooks_budget_line_quotes_the_recorded_times():
+    """The solution notebook's budget paragraph quotes the recorded full-budget times (the benchmark's run of every
+    cell, and the notebook under a Jupyter kernel) with their loads, and the FAST run's, as the results file has them."""
+    import nbformat
+
+    result = json.loads((REPO / "bench" / "results" / "hw7_verifier_rl.json").read_text())
+    budgets = result["budgets"]
+    want = [f"{result['exec_seconds']:,.0f} s", f"{budgets['notebook_full']['seconds']:,.0f} s",
+            f"load {budgets['notebook_full']['load_before'][0]:.0f} at its start, {budgets['notebook_full']['load'][0]:.0f} at its end",
+            f"{budgets['notebook_fast']['seconds']:.0f} s"]
+    nb = nbformat.read(REPO / "solutions" / "hw7_verifier_rl" / "hw7_verifier_rl.ipynb", as_version=4)
+    text = next(c.source for c in nb.cells if c.cell_type == "markdown" and c.source.startswith("## Budgets"))
+    text = text.replace("\n", " ")
+    missing = [w for w in want if w not in text]
+    assert not missing, f"figures of bench/results/hw7_verifier_rl.json the budget paragraph does not quote: {missing}"
