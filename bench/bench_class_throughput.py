@@ -209,6 +209,18 @@ def per_test(assignment: str) -> dict:
             "tests": tests}
 
 
+def add_reference_ratio(rows: list[dict], per_test_records: dict) -> None:
+    """Beside each row, its CPU per submission (every process of the batch, the mix of 20 as graded) and its ratio
+    to the reference's own CPU on the suite (``per_test``'s reference alone: the solution graded as the student in
+    one process, no sandbox), where a per-test record of that assignment is at hand."""
+    for r in rows:
+        ref = (per_test_records.get(r["assignment"]) or {}).get("reference_alone", {}).get("cpu")
+        if ref and r.get("n"):
+            r["cpu_per_submission"] = round(r["cpu"] / r["n"], 3)
+            r["reference_suite_cpu"] = ref
+            r["cpu_to_reference"] = round(r["cpu"] / r["n"] / ref, 2)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, default=20)
@@ -308,6 +320,12 @@ def main() -> None:
                   f"grader CPU + {d['complete']['tests_worker_cpu']:.1f} s worker CPU in tests, "
                   f"{d['complete']['tests_messages']:.0f} messages; reference alone {d['reference_alone']['cpu']:.1f} s "
                   f"CPU; looping sample {d['infinite_loop']['wall']:.1f} s", flush=True)
+    add_reference_ratio(rows, details or (json.loads((REPO / "bench" / "results" / "class_throughput.json").read_text())
+                                          .get("per_test", {}) if (REPO / "bench" / "results" / "class_throughput.json").exists() else {}))
+    for r in rows:
+        if "cpu_to_reference" in r:
+            print(f"{r['assignment']}: {r['cpu_per_submission']:.2f} s CPU a submission, {r['cpu_to_reference']:.1f} x the "
+                  f"reference's own suite CPU ({r['reference_suite_cpu']:.2f} s)")
     if args.record:
         name = "class_throughput_no_cache.json" if args.no_reference_cache else "class_throughput.json"
         out = REPO / "bench" / "results" / name
