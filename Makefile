@@ -36,9 +36,9 @@ test: setup
 	$(PY) -m pytest -q
 
 ## The edit-test loop: everything but the end-to-end tests marked slow (notebook runs, batches, the
-## security corpus, the site). CI runs the whole suite (make test).
+## security corpus, the site), over both cores (pytest-xdist). CI runs the whole suite (make test).
 test-fast: setup
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" -n 2
 
 ## Regenerate every student notebook from solutions/ with nbgrader.
 assignments: setup
