@@ -11,8 +11,8 @@ Validate answers in about a minute; and no cell is cut off before ``CELL_TIMEOUT
 
 ``python -m rlcourse.student_lab`` hides nbgrader's instructor entries (Formgrader, Create
 Assignment, and the exchange's assignment and course lists, which this course does not use) with
-JupyterLab's own command, ``jupyter labextension disable`` (what nbgrader's installation guide
-says), in this Python environment (``--user``: in the user's Jupyter config instead), and turns
+JupyterLab's own ``jupyter labextension disable`` (what nbgrader's installation guide says; its
+function, called in this process), in this Python environment (``--user``: in the user's Jupyter config instead), and turns
 their server extensions off in the same place through Jupyter Server's config manager (nbgrader
 0.9.6's ``jupyter server extension disable`` refuses them: it cannot validate the module).
 Validate stays.
@@ -20,8 +20,6 @@ Validate stays.
 from __future__ import annotations
 
 import argparse
-import subprocess
-import sys
 from pathlib import Path
 
 CELL_TIMEOUT = 600
@@ -70,11 +68,10 @@ def hide_instructor_entries(user: bool = False) -> Path:
     from jupyter_core.paths import ENV_CONFIG_PATH, jupyter_config_dir
     from jupyter_server.config_manager import BaseJSONConfigManager
 
-    jupyter = str(Path(sys.executable).with_name("jupyter"))
-    level = "--level=user" if user else "--level=sys_prefix"
+    from jupyterlab.commands import disable_extension  # what `jupyter labextension disable` runs
+
     for plugin in HIDDEN_LAB_PLUGINS:
-        subprocess.run([jupyter, "labextension", "disable", level, plugin], check=True,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        disable_extension(plugin, level="user" if user else "sys_prefix")
     folder = Path(jupyter_config_dir() if user else ENV_CONFIG_PATH[0])
     BaseJSONConfigManager(config_dir=str(folder)).update(
         "jupyter_server_config", {"ServerApp": {"jpserver_extensions": dict.fromkeys(HIDDEN_SERVER_EXTENSIONS, False)}})
