@@ -355,8 +355,10 @@ def test_hw3_annotator_widget_advances_shows_progress_and_reports_the_unfinished
                " {subtree: true, childList: true, characterData: true, attributes: true}); })()")
         assert n == 2 * ANNOTATOR_LABELS, first
         # how long one pair takes to render here: the widget's cell, which returns once its first pair is drawn
-        timing = lab.js(f"{CELLS}.find(c => c.model.sharedModel.source.includes('display(annotate_yourself('))"
-                        ".model.getMetadata('execution')")
+        timing = lab.wait_js("the widget cell's timing (its reply can follow the first pair on screen)",
+                             f"(() => {{ const t = {CELLS}.find(c => c.model.sharedModel.source.includes("
+                             "'display(annotate_yourself(')).model.getMetadata('execution');"
+                             " return t && t['shell.execute_reply'] && t; })()", 30)
         render = (_seconds(timing["shell.execute_reply"]) - _seconds(timing["iopub.execute_input"]))
         waits = []
         for k in range(2, n + 1):
