@@ -50,7 +50,8 @@ def solution_notebook(assignment: str, title: str) -> nbformat.NotebookNode:
         new_code_cell("FAST = False", metadata={"tags": ["parameters"]}),
         _setup("setup_imports", "import numpy as np\n\nEPISODES = 3 if FAST else 100"),
         new_markdown_cell("## Returns to go\n\nThe return from step $t$ on is $G_t = \\sum_{k \\ge t} "
-                          "\\gamma^{k-t} r_k$, computed backwards as $G_t = r_t + \\gamma G_{t+1}$."),
+                          "\\gamma^{k-t} r_k$, computed backwards as $G_t = r_t + \\gamma G_{t+1}$ "
+                          "([lecture 6, advantages as the notebooks compute them](../../lectures/06_rlhf.md#Advantages-as-the-notebooks-compute-them); a stub links the section it implements)."),
         _stub("returns_to_go", '''def returns_to_go(rewards, gamma):
     """G_t for every step of each episode.
 
@@ -70,7 +71,7 @@ def solution_notebook(assignment: str, title: str) -> nbformat.NotebookNode:
                                 'assert G.shape == (1, 3), f"returns_to_go should keep the shape (1, 3), got {G.shape}"\n'
                                 'assert np.allclose(G, [[1.75, 1.5, 1.0]]), f"expected [[1.75, 1.5, 1.0]], got {G}"'),
         new_markdown_cell("## The mean return\n\nThe value of the start state, estimated from episodes: the mean of "
-                          "$G_0$ over them."),
+                          "$G_0$ over them ([lecture 6, advantages as the notebooks compute them](../../lectures/06_rlhf.md#Advantages-as-the-notebooks-compute-them))."),
         _stub("mean_return", '''def mean_return(rewards, gamma):
     """The mean over episodes of G_0 (uses returns_to_go).
 
