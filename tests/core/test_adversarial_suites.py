@@ -43,17 +43,21 @@ def test_every_stub_has_a_trivial_answer(assignment):
         f"autograder/suites/{assignment}/trivial_answers.py must answer every stub (python -m autograder new makes one)"
 
 
-@pytest.mark.parametrize("assignment", gradable_assignments())
-def test_trivial_answers_and_seed_search_earn_nothing(assignment, open_tmp):
-    path = open_tmp / f"trivial_{assignment}.ipynb"
-    nbformat.write(_with_stubs(assignment, trivial_answers(assignment)), str(path))
+def _earned(assignment: str, stubs: dict[str, str], path) -> dict[str, list[str]]:
+    """Grade the solution notebook with ``stubs`` in place of its stub cells: the tests passed, by stub that scored."""
+    nbformat.write(_with_stubs(assignment, stubs), str(path))
     grader = Grader(assignment)
     try:
         result = grader.grade(path)
     finally:
         grader.close()
     assert result.has_score, result.error
-    earned = {s.name: [t.name for t in s.tests if t.passed] for s in result.stubs if s.score > 0}
+    return {s.name: [t.name for t in s.tests if t.passed] for s in result.stubs if s.score > 0}
+
+
+@pytest.mark.parametrize("assignment", gradable_assignments())
+def test_trivial_answers_and_seed_search_earn_nothing(assignment, open_tmp):
+    earned = _earned(assignment, trivial_answers(assignment), open_tmp / f"trivial_{assignment}.ipynb")
     assert not earned, f"trivial answers earned points on {assignment}: {earned}"
 
 
@@ -67,15 +71,8 @@ def test_stubs_that_always_raise_earn_nothing(open_tmp):
         stubs = {name: (f"class {name}:\n    def __init__(self, *args, **kwargs):\n        raise {error}('no')\n"
                         if name[:1].isupper() else f"def {name}(*args, **kwargs):\n    raise {error}('no')\n")
                  for name in course.stub_names(assignment)}
-        path = open_tmp / f"raises_{assignment}.ipynb"
-        nbformat.write(_with_stubs(assignment, stubs), str(path))
-        grader = Grader(assignment)
-        try:
-            result = grader.grade(path)
-        finally:
-            grader.close()
-        assert result.has_score, result.error
-        earned.update({f"{assignment}.{s.name}": [t.name for t in s.tests if t.passed] for s in result.stubs if s.score})
+        earned.update({f"{assignment}.{name}": tests for name, tests in
+                       _earned(assignment, stubs, open_tmp / f"raises_{assignment}.ipynb").items()})
     assert not earned, f"stubs that always raise {error} earned points: {earned}"
 
 
