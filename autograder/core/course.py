@@ -189,14 +189,14 @@ def library_masks(assignment: str, root: Path | None = None) -> list[Path]:
     """What a worker grading ``assignment`` must not read of the library at ``root``: every module outside
     :func:`library_modules`, and every compiled cache (``__pycache__``), which would hold a masked module's
     code (a worker compiles what it imports from source, in memory)."""
-    root = Path(root or REPO)
-    needed = library_modules(assignment, root)
-    if (root / LIBRARY).is_dir():  # a cache the grader's own imports make later would not be masked: make it now
-        with contextlib.suppress(OSError):
-            (root / LIBRARY / "__pycache__").mkdir(exist_ok=True)
-    files = sorted((root / LIBRARY).rglob("*.py")) if (root / LIBRARY).is_dir() else []
-    caches = sorted(p for p in (root / LIBRARY).rglob("__pycache__") if p.is_dir()) if (root / LIBRARY).is_dir() else []
-    return [*(p for p in files if p not in needed and "__pycache__" not in p.parts), *caches]
+    library = Path(root or REPO) / LIBRARY
+    if not library.is_dir():
+        return []
+    needed = library_modules(assignment, library.parent)
+    with contextlib.suppress(OSError):  # a cache the grader's own imports make later would not be masked: make it now
+        (library / "__pycache__").mkdir(exist_ok=True)
+    caches = sorted(p for p in library.rglob("__pycache__") if p.is_dir())
+    return [*(p for p in sorted(library.rglob("*.py")) if p not in needed and "__pycache__" not in p.parts), *caches]
 
 
 def sandbox_view(hide: "Iterable[Path]" = (), assignment: str | None = None) -> "View":
@@ -214,14 +214,11 @@ def sandbox_view(hide: "Iterable[Path]" = (), assignment: str | None = None) -> 
 
     from autograder.sandbox.config import View
 
-    shown, masked, withheld = [], [], []
+    shown, masked = [], []
     for root in dict.fromkeys([INSTALLED, REPO]):
         s, m = release_paths(Path(root))
         shown += [n for p in s for n in (release_notebooks(p, assignment) if p.name == "assignments" else [p])]
-        masked += m
-        if assignment is not None:
-            withheld += library_masks(assignment, Path(root))
-    masked += withheld
+        masked += [*m, *(library_masks(assignment, Path(root)) if assignment is not None else ())]
     python = [Path(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix)]
     paths = [*shown, *python, *(p.resolve() for p in (*shown, *python))]
     paths = sorted({str(p) for p in paths})
