@@ -115,35 +115,6 @@ LIBRARY = "rlcourse"
 """The student library: the one package of the release that a notebook, and so a stub, imports."""
 
 
-def imported_names(source: str, package: str | None = None) -> set[str]:
-    """Every module a Python source may import, read from its AST (imports inside functions included):
-    ``import a.b`` gives ``a`` and ``a.b``; ``from a import b`` gives ``a`` and ``a.b`` (``b`` may be a
-    module); a relative import is resolved against ``package``. Unparsable source imports nothing."""
-    import ast
-
-    try:
-        tree = ast.parse(source)
-    except SyntaxError:
-        return set()
-    names: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                parts = alias.name.split(".")
-                names.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                if package is None:
-                    continue
-                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
-                base = ".".join([*anchor, *([base] if base else [])])
-            parts = base.split(".")
-            names.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
-            names.update(f"{base}.{alias.name}" for alias in node.names)
-    return names
-
-
 def _library_file(root: Path, module: str) -> Path | None:
     """The source file of library module ``module`` under ``root`` (``rlcourse.lm`` -> ``rlcourse/lm.py``)."""
     parts = module.split(".")
@@ -165,7 +136,7 @@ def library_modules(assignment: str, root: Path | None = None) -> set[Path]:
     assignment's stubs, under its own name or behind an adapter. A student's stub may import anything its
     reference imports, so a correct stub never misses a module.
     """
-    from autograder.core.notebook import read_notebook, release_plan
+    from autograder.core.notebook import imported_names, read_notebook, release_plan
 
     root = Path(root or REPO)
     sources = [c.source for c in release_plan(read_notebook(release_notebook(assignment))) if c.kind != "stub"]

@@ -20,7 +20,7 @@ from autograder.core.intake import (MAX_NOTEBOOK_BYTES, CodeCell, NotebookError,
                                read_cells)
 
 __all__ = ["MAX_NOTEBOOK_BYTES", "NotebookError", "StubMatch", "defined_names", "find_stubs", "imported_modules",
-           "manual_cells", "read_notebook", "read_submission", "release_plan", "with_parameters"]
+           "imported_names", "manual_cells", "read_notebook", "read_submission", "release_plan", "with_parameters"]
 PARAMETERS_TAG, SETUP_TAG = "parameters", "setup"
 
 
@@ -154,3 +154,30 @@ def imported_modules(sources: list[str]) -> list[str]:
             elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
                 modules.append(node.module)
     return list(dict.fromkeys(modules))
+
+
+def imported_names(source: str, package: str | None = None) -> set[str]:
+    """Every module a Python source may import, read from its AST (imports inside functions included):
+    ``import a.b`` gives ``a`` and ``a.b``; ``from a import b`` gives ``a`` and ``a.b`` (``b`` may be a
+    module); a relative import is resolved against ``package``. Unparsable source imports nothing."""
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return set()
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                names.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                if package is None:
+                    continue
+                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, *([base] if base else [])])
+            parts = base.split(".")
+            names.update(".".join(parts[:k]) for k in range(1, len(parts) + 1))
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names

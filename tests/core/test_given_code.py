@@ -18,8 +18,9 @@ import pytest
 
 from autograder.core import course
 from autograder.core.grader import Grader
+from autograder.core.notebook import imported_names
 from autograder.sandbox.config import SpawnConfig
-from conftest import REPO, with_cells
+from conftest import with_cells
 
 # hw3: Bradley-Terry utilities from hw3's own feedback-spectrum fitter (a linear model on one-hot features),
 # and the Plackett-Luce loss read out of the closure that the Plackett-Luce fitter hands to the optimiser.
@@ -162,8 +163,8 @@ def test_imports_are_read_from_the_ast_with_relative_and_nested_ones():
         def f():
             from rlcourse.group_rl import x
         """)
-    names = course.imported_names(source, package="rlcourse")
+    names = imported_names(source, package="rlcourse")
     assert {"rlcourse", "rlcourse.lm", "rlcourse.reviews", "rlcourse.seeding", "rlcourse.data",
             "rlcourse.group_rl"} <= names
-    assert course.imported_names("def broken(:\n") == set()
-    assert "rlcourse.seeding" not in course.imported_names("from . import seeding")  # no package: not resolvable
+    assert imported_names("def broken(:\n") == set()
+    assert "rlcourse.seeding" not in imported_names("from . import seeding")  # no package: not resolvable

@@ -1,7 +1,8 @@
 """hw6's given code answers none of hw5's stubs: hw5's hidden suite, run against each of hw6's given helpers.
 
-The whole student release is readable while hw5 is graded, so a helper that hw6 gives (``rlcourse.group_rl``)
-must not be one of hw5's stubs under another name. Each submission here is hw5's complete sample with every
+A helper that hw6 gives (``rlcourse.group_rl``) must not be one of hw5's stubs under another name. (The sandbox
+now shows hw5 only the library modules grading it needs, so these imports fail there; the test stays as the
+second wall, for a view that would show more; ``tests/core/test_given_code.py`` grades adapters with controls.) Each submission here is hw5's complete sample with every
 stub cell replaced by an import of one ``rlcourse.group_rl`` function under that stub's name; over the
 submissions, every helper stands in for every stub once. Graded by the real grader, each must score 0 on
 every stub. A control (hw6's former helper, which took logits and a mask) shows the check can fail: it
