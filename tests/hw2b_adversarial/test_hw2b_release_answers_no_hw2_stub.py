@@ -2,8 +2,8 @@
 
 Since the sandbox shows hw2 only the library modules grading it needs (``course.library_modules``), the imports
 below fail there; this test stays as the design's second wall, for a view that would show more.
-``rlcourse.adversarial`` (what hw2b gives) must not plan, compute visitation frequencies or fit MaxEnt weights by itself: hw2b's students write the backward
-and forward passes (``soft_policy``, ``state_distributions``) and the module takes them as arguments. Each
+``rlcourse.adversarial`` (what hw2b gives) must not plan, compute visitation frequencies or fit MaxEnt weights
+by itself: hw2b's students write the backward and forward passes (``soft_policy``, ``state_distributions``) and the module takes them as arguments. Each
 submission here is hw2's complete sample with every stub cell replaced by an import of one
 ``rlcourse.adversarial`` function under that stub's name; over the submissions, every function stands in for
 every stub once. Graded by the real grader, each must score 0 on every stub. A control (an exact soft backward
