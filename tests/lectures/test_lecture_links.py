@@ -206,8 +206,8 @@ def test_a_link_to_a_missing_label_or_page_is_reported(tmp_path, monkeypatch):
 
 
 # Stubs whose Markdown does not yet link the lecture equation they implement ("<id>:<grade_id>"), each to be removed
-# by the commit that adds the link (hw7's notebook is being re-measured by its owner).
-STUBS_UNLINKED: set[str] = {"hw7_verifier_rl:verifier_reward", "hw7_verifier_rl:rft_loss"}
+# by the commit that adds the link.
+STUBS_UNLINKED: set[str] = set()
 
 
 def test_every_stubs_markdown_links_the_lecture_it_implements():
