@@ -106,6 +106,12 @@ def timed_batch(assignment: str, folder: Path, out: Path, jobs: int) -> tuple[fl
     return wall, (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
 
 
+def sandbox_cpu(out: Path) -> float:
+    """CPU seconds of the sandbox workers of a batch, summed from its results (``sandbox_cpu``): the part of a class's
+    cost that the batch's own process accounts miss (the workers are not its waited-for children)."""
+    return sum(json.loads(path.read_text()).get("sandbox_cpu", 0.0) for path in out.rglob("result.json"))
+
+
 def overhead(assignment: str = "hw0_setup", sample: str = "untouched", repeats: int = 3) -> float:
     """Median seconds to grade one sample with one warm Grader: what every submission pays besides its tests."""
     from autograder.core.grader import Grader
@@ -210,15 +216,16 @@ def per_test(assignment: str) -> dict:
 
 
 def add_reference_ratio(rows: list[dict], per_test_records: dict) -> None:
-    """Beside each row, its CPU per submission (every process of the batch, the mix of 20 as graded) and its ratio
-    to the reference's own CPU on the suite (``per_test``'s reference alone: the solution graded as the student in
-    one process, no sandbox), where a per-test record of that assignment is at hand."""
+    """Beside each row, its CPU per submission (the batch's processes and its sandbox workers, the mix of 20 as
+    graded) and its ratio to the reference's own CPU on the suite (``per_test``'s reference alone: the solution
+    graded as the student in one process, no sandbox), where a per-test record of that assignment is at hand."""
     for r in rows:
         ref = (per_test_records.get(r["assignment"]) or {}).get("reference_alone", {}).get("cpu")
         if ref and r.get("n"):
-            r["cpu_per_submission"] = round(r["cpu"] / r["n"], 3)
+            total = r["cpu"] + r.get("sandbox_cpu", 0.0)
+            r["cpu_per_submission"] = round(total / r["n"], 3)
             r["reference_suite_cpu"] = ref
-            r["cpu_to_reference"] = round(r["cpu"] / r["n"] / ref, 2)
+            r["cpu_to_reference"] = round(total / r["n"] / ref, 2)
 
 
 def main() -> None:
@@ -299,10 +306,12 @@ def main() -> None:
             make_class(root / "class", assignment, args.n)
             wall, cpu = timed_batch(assignment, root / "class", root / "out", args.jobs)
             n = len(list((root / "class").iterdir()))
-            rows.append({"assignment": assignment, "n": n, "wall": wall, "cpu": cpu, "start": start_wall,
+            rows.append({"assignment": assignment, "n": n, "wall": wall, "cpu": cpu,
+                         "sandbox_cpu": round(sandbox_cpu(root / "out"), 3), "start": start_wall,
                          "extrapolated_200": start_wall + (wall - start_wall) * 200 / n,
                          "load": os.getloadavg()[0]})
-            print(f"{assignment}: {n} in {wall:.0f} s (start-up {start_wall:.0f} s, CPU {cpu:.0f} s)", flush=True)
+            print(f"{assignment}: {n} in {wall:.0f} s (start-up {start_wall:.0f} s, CPU {cpu:.0f} s and "
+                  f"{rows[-1]['sandbox_cpu']:.0f} s in the sandbox)", flush=True)
     total, total_200 = sum(r["wall"] for r in rows), sum(r["extrapolated_200"] for r in rows)
     print(f"\n| assignment | class | wall | CPU | start-up (a class of 1) | 200 students (extrapolated) |")
     print("|---|---:|---:|---:|---:|---:|")

@@ -283,18 +283,27 @@ def headline_class_throughput(data: dict) -> Headline:
     if not isinstance(rows, list) or not all(isinstance(r, dict) and "assignment" in r for r in rows):
         return [], set()
     ratio = any("cpu_to_reference" in r for r in rows)
-    body = [[cell(str(r["assignment"])), fmt(r.get("n")), fmt(r.get("wall")), fmt(r.get("cpu")), fmt(r.get("start")),
-             fmt(r["extrapolated_200"] / 60) if is_number(r.get("extrapolated_200")) else "–", fmt(r.get("load"))]
+    sandbox = any("sandbox_cpu" in r for r in rows)
+    body = [[cell(str(r["assignment"])), fmt(r.get("n")), fmt(r.get("wall")), fmt(r.get("cpu"))]
+            + ([fmt(r.get("sandbox_cpu"))] if sandbox else [])
+            + [fmt(r.get("start")), fmt(r["extrapolated_200"] / 60) if is_number(r.get("extrapolated_200")) else "–",
+               fmt(r.get("load"))]
             + ([fmt(r.get("reference_suite_cpu")), fmt(r.get("cpu_to_reference"))] if ratio else []) for r in rows]
     if is_number(data.get("total_wall")):
         total = data.get("extrapolated_200_total")
-        body.append(["all", fmt(sum(r.get("n", 0) for r in rows)), fmt(data["total_wall"]), fmt(sum(r.get("cpu") or 0 for r in rows)),
-                     "", fmt(total / 60) if is_number(total) else "–", ""] + (["", ""] if ratio else []))
-    text = table(["assignment", "class", "wall (s)", "CPU, grader side (s)", "start-up (s)", "200 students, extrapolated (min)",
-                  "load at its end"] + (["reference's own suite CPU (s)", "CPU a submission ÷ reference's"] if ratio else []),
-                 body, ["---", "---:", "---:", "---:", "---:", "---:", "---:"] + (["---:", "---:"] if ratio else []))
-    note = ("A class of 200 is extrapolated as T(200) = T(start) + (T(n) − T(start)) × 200 / n; the CPU column is "
-            "the grading processes' own, without the sandbox workers, so it is a floor.")
+        body.append(["all", fmt(sum(r.get("n", 0) for r in rows)), fmt(data["total_wall"]), fmt(sum(r.get("cpu") or 0 for r in rows))]
+                    + ([fmt(sum(r.get("sandbox_cpu") or 0 for r in rows))] if sandbox else [])
+                    + ["", fmt(total / 60) if is_number(total) else "–", ""] + (["", ""] if ratio else []))
+    text = table(["assignment", "class", "wall (s)", "CPU, grader side (s)"] + (["CPU, sandbox workers (s)"] if sandbox else [])
+                 + ["start-up (s)", "200 students, extrapolated (min)", "load at its end"]
+                 + (["reference's own suite CPU (s)", "CPU a submission ÷ reference's"] if ratio else []),
+                 body, ["---", "---:", "---:", "---:"] + (["---:"] if sandbox else []) + ["---:", "---:", "---:"]
+                 + (["---:", "---:"] if ratio else []))
+    note = ("A class of 200 is extrapolated as T(200) = T(start) + (T(n) − T(start)) × 200 / n. "
+            + ("The sandbox workers' CPU (their main threads, as each result records it) is counted apart from the "
+               "grading processes' own, and the ratio to the reference counts both."
+               if sandbox else "The CPU column is the grading processes' own, without the sandbox workers, so it is "
+                               "a floor, and so is the ratio beside it."))
     return ["## A class per assignment", (text, ""), note], {"rows", "total_wall", "extrapolated_200_total"}
 
 

@@ -336,6 +336,7 @@ class Grader:
         session = Session(self.zygote, self.cells_for(stubs), self.config, reference_call=self._reference_call,
                           missing=[s for s in self.expected if s not in stubs and s not in unrunnable],
                           unrunnable=unrunnable)
+        failed: GradeResult | None = None
         try:
             session.start()
             broken_setup = [s.message for label, s in session.status.items()
@@ -351,16 +352,19 @@ class Grader:
             if plugin.grader_faults:
                 raise GraderError("; ".join(plugin.grader_faults))
         except GraderError as err:
-            return self.grader_error(result.submission, str(err), result.notes, start)
+            failed = self.grader_error(result.submission, str(err), result.notes, start)
         except SandboxFailure as err:
-            return self._ungradable(result, str(err), start)
+            failed = self._ungradable(result, str(err), start)
         finally:
             session.close()
-        result.stubs = self._collect(plugin.outcomes)
-        if session.restarts:
-            result.notes.append(f"the sandbox was restarted {session.restarts} time(s) after failures in your code")
-        result.seconds = time.monotonic() - start
-        return result.make_encodable()
+        if failed is None:
+            result.stubs = self._collect(plugin.outcomes)
+            if session.restarts:
+                result.notes.append(f"the sandbox was restarted {session.restarts} time(s) after failures in your code")
+            result.seconds = time.monotonic() - start
+        out = result if failed is None else failed
+        out.sandbox_cpu = round(session.counters()["worker_cpu"], 3)
+        return out.make_encodable()
 
     def _blame_setup(self, session: Session, failure: str) -> None:
         """A released setup cell failed: the grader's fault if it fails alone too, else the stubs' before it."""

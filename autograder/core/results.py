@@ -102,6 +102,9 @@ class GradeResult:
     status: str = GRADED
     suite_version: str = ""
     """:func:`autograder.core.course.suite_version` of the suite that graded it (empty in results older than it)."""
+    sandbox_cpu: float = 0.0
+    """CPU seconds its sandbox workers' main threads used (cells and tests): what the grading process's own CPU
+    accounts leave out, recorded so that a benchmark can count a class's whole cost (0 in older results)."""
 
     @property
     def score(self) -> float:
@@ -145,4 +148,4 @@ def result_from_dict(data: dict[str, Any]) -> GradeResult:
     status = data.get("status", UNGRADABLE if data["error"] else GRADED)
     return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
                        data["notes"], data["error"], data["isolation"], data["seconds"], status,
-                       str(data.get("suite_version", "")))
+                       str(data.get("suite_version", "")), float(data.get("sandbox_cpu", 0.0)))

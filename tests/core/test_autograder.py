@@ -40,6 +40,18 @@ def test_reference_solution_scores_full_marks(fx_grader):
     assert result.isolation in ("full", "user-namespace")
 
 
+def test_the_result_counts_the_sandbox_cpu_of_the_students_code(fx_grader, tmp_path):
+    """What a benchmark adds to the grading process's own CPU: the workers' CPU, which a busy cell raises."""
+    from autograder.core.results import result_from_dict, result_to_dict
+
+    idle = fx_grader.grade(REPO / "tests/fixtures/course/solutions/fx/fx.ipynb")
+    busy_cell = SOLVED["mean_of"] + "\n\nimport time\n_t = time.process_time()\nwhile time.process_time() - _t < 0.5:\n    pass"
+    busy = fx_grader.grade(with_cells(REPO / "tests/fixtures/course/solutions/fx/fx.ipynb", tmp_path / "busy.ipynb",
+                                      {"mean_of": busy_cell}))
+    assert 0 < idle.sandbox_cpu < 0.5 <= busy.sandbox_cpu, (idle.sandbox_cpu, busy.sandbox_cpu)
+    assert result_from_dict(result_to_dict(busy)).sandbox_cpu == busy.sandbox_cpu
+
+
 def test_student_notebook_scores_zero_with_not_implemented(fx_grader):
     result = fx_grader.grade(REPO / "tests/fixtures/course/assignments/fx/fx.ipynb")
     assert result.score == 0 and result.max_score == 7
