@@ -416,6 +416,43 @@ def preference_only(args, workers: int) -> dict:
     return out
 
 
+GUARD_STEPS_FACTOR = 4
+GUARD_DECLARATION = (
+    "Declared on 2026-12-04, before its runs, after the KL sweep had shown every candidate covered (disagreement "
+    "0.266 to 0.354 against the threshold 0.417): the coverage rule is tested on a policy that optimises the learned "
+    "reward harder than any candidate, no KL penalty and 4 x the PPO budget (800,000 steps), seeds 0, 1 and 2. "
+    "Prediction: its mean ensemble disagreement exceeds the threshold, so the rule would reject it. Reported "
+    "whichever way it comes out; its true return is recorded and, like the sweep's, read by no choice.")
+
+
+def guard_check(args, workers: int) -> dict:
+    """The coverage rule on a policy pushed past every candidate (``GUARD_DECLARATION``): RLHF without a KL penalty
+    for ``GUARD_STEPS_FACTOR`` times the budget. Merged into the results file under ``preference_only.guard_check``."""
+    from rlcourse.preferences import load_hopper_preferences
+    from rlcourse.rlhf import disagreement_threshold, load_reward_model
+
+    steps = GUARD_STEPS_FACTOR * (args.steps or 200_000)
+    prefs, rm = load_hopper_preferences(), load_reward_model()
+    test = prefs.test_segment
+    threshold = disagreement_threshold(rm, prefs.obs[test], prefs.act[test], ~prefs.absorbing[test])
+    with ProcessPoolExecutor(workers) as pool:
+        runs = list(pool.map(pref_job, ["pref_rlhf"] * len(args.seeds), args.seeds, [0.0] * len(args.seeds),
+                             [steps] * len(args.seeds)))
+    out = {"declared": GUARD_DECLARATION, "meta": run_record.meta(), "kl_coef": 0.0, "steps": steps,
+           "disagreement_threshold": threshold,
+           "runs": [{"seed": r["seed"], "check": r["check"], "covered": r["check"]["disagreement"] <= threshold,
+                     "final": r["final"], "wall": r["wall"], "cpu": r["cpu"]} for r in runs]}
+    out["rejected_seeds"] = [r["seed"] for r in out["runs"] if not r["covered"]]
+    saved = json.loads(RESULTS.read_text())
+    saved["preference_only"]["guard_check"] = out
+    RESULTS.write_text(json.dumps(saved, indent=1))
+    print(f"guard check ({steps:,} steps, no KL penalty, threshold {threshold:.3f}): " + "; ".join(
+        f"seed {r['seed']}: disagreement {r['check']['disagreement']:.3f} "
+        f"({'covered' if r['covered'] else 'REJECTED'}), learned return {r['check']['learned_return']:.0f}, "
+        f"KL {r['check']['kl']:.2f}, true return {r['final']['return']:.0f}" for r in out["runs"]))
+    return out
+
+
 def print_preference_only(out: dict) -> None:
     print(f"\n### hw4_rlhf_dpo, every setting from preference data ({out['protocol']})\n")
     print(f"offset b = {out['offset']:.2f} (data), KL coefficient {out['kl_coef']:g}, beta {out['beta']:g} "
@@ -470,6 +507,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--smoke", action="store_true", help="the notebook's FAST budgets, results not written")
     p.add_argument("--preference-only", action="store_true",
                    help="only the runs whose every setting is chosen from preference data (key preference_only)")
+    p.add_argument("--guard-check", action="store_true", help="only the coverage rule's test on a policy pushed "
+                   "past every candidate (GUARD_DECLARATION), merged into the results file")
     p.add_argument("--tables-only", action="store_true", help="reprint (and with --record, re-record) the tables "
                    "from bench/results/hw4_rlhf_dpo.json without running anything")
     args = p.parse_args(argv)
@@ -478,6 +517,9 @@ def main(argv: list[str] | None = None) -> None:
         global RESULTS, FINAL_EPISODES
         RESULTS, FINAL_EPISODES = Path(os.environ.get("TMPDIR", "/tmp")) / "hw4_bench_smoke.json", 2
 
+    if args.guard_check:
+        guard_check(args, args.workers)
+        return
     if args.preference_only:
         out = (json.loads(RESULTS.read_text())["preference_only"] if args.tables_only
                else preference_only(args, args.workers))
