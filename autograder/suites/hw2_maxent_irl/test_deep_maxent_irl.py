@@ -112,13 +112,16 @@ def test_history_values(student, reference):
 
 @stub("deep_maxent_irl", points=2, hint=HINT)
 def test_learns_as_well_as_reference(student, reference):
-    """After 150 iterations the learned reward's soft policy earns about what the reference's does"""
+    """After 60 iterations the learned reward's soft policy earns about what the reference's does"""
+    # 60 iterations, not 150: the reference's soft policy is then about 1.0 below the expert's true return (0.2 to
+    # 0.6 after 150, 9.0 to 9.5 at the initial network, 19.9 for gradient descent instead of ascent), well inside the
+    # allowed 0.15 x horizon = 2.1 of the reference's own.
     world, args = _world_and_args()
-    got, _ = student.deep_maxent_irl(*args, n_iters=150)
+    got, _ = student.deep_maxent_irl(*args, n_iters=60)
     got = np.asarray(got, dtype=float) if isinstance(got, np.ndarray) else got
     assert isinstance(got, np.ndarray) and got.shape == (world.n_states,) and np.isfinite(got).all(), (
         f"the reward should be a finite numpy array of shape (S,) = ({world.n_states},), got {np.shape(got)}")  # before the reference sees it
-    want, want_hist = reference.deep_maxent_irl(*args, n_iters=150)
+    want, want_hist = reference.deep_maxent_irl(*args, n_iters=60)
     gap_got, gap_want = _ratio(reference, world, got), _ratio(reference, world, want)
     short = gap_want - gap_got
     assert short <= 0.15 * world.horizon, (
