@@ -34,13 +34,21 @@ def _initial_learner(policy_seed):
         return GaussianPolicy(4, 1, hidden=(16,)).eval()
 
 
-def _run(student, betas, episodes=2, seed=0, policy_seed=0, hidden=(16,), state=None, timeout=None, **train):
+def _run(student, betas, episodes=2, seed=0, policy_seed=0, hidden=(16,), state=None, timeout=None, trainer=None,
+         **train):
     """The student's (policy, history) for a DAgger run on the race track, from a GaussianPolicy(4, 1, hidden)
-    seeded ``policy_seed`` (or with the weights ``state``)."""
+    seeded ``policy_seed`` (or with the weights ``state``); with ``trainer`` (a ``_Trainer``), its train_bc replaced
+    by the stand-in that trains nothing and loads the weights the trainer plants."""
     demo = _demo()
     train = {"n_epochs": 3, "batch_size": 64, "lr": 3e-3, **train}
-    result = student.helpers.run_dagger(list(betas), demo.obs, demo.actions, episodes, seed, policy_seed=policy_seed,
-                                        hidden=tuple(hidden), state=state, timeout=timeout, **train)
+    if trainer is None:
+        result = student.helpers.run_dagger(list(betas), demo.obs, demo.actions, episodes, seed, policy_seed=policy_seed,
+                                            hidden=tuple(hidden), state=state, timeout=timeout, **train)
+    else:
+        assert state is None, "suite error: the stand-in run starts from a seeded learner"
+        result = student.helpers.run_dagger_with_stand_in(lend(trainer, methods=["train"]), list(betas), demo.obs,
+                                                          demo.actions, episodes, seed, policy_seed=policy_seed,
+                                                          hidden=tuple(hidden), timeout=timeout, **train)
     assert isinstance(result, tuple) and len(result) == 2, "dagger should return (policy, history)"
     policy, hist = result
     assert isinstance(hist, dict) and {"returns", "dataset_sizes", "obs", "actions"} <= set(hist), \
@@ -93,8 +101,10 @@ def test_every_label_is_the_experts_action(student):
 @stub("dagger", points=2, hint=HINT)
 def test_follows_the_beta_schedule(student):
     """Schedule [0, 1, 1]: iteration 0 drives the learner, iterations 1 and 2 are exactly the expert's seeded episodes"""
+    # train_bc replaced by the stand-in (what is rolled out does not depend on what training does with the data)
     seed, episodes = 2, 2
-    _, hist = _run(student, [0.0, 1.0, 1.0], episodes=episodes, seed=seed, policy_seed=3)
+    _, hist = _run(student, [0.0, 1.0, 1.0], episodes=episodes, seed=seed, policy_seed=3,
+                   trainer=_Trainer([_planted(70)[0]]))
     learner = rollout(_initial_learner(3).act, racetrack.ENV_ID, episodes, seed=seed)
     check_scalar(hist["returns"][0], float(learner.returns.mean()), rtol=1e-4,
                  name="iteration 0's mean return (beta = beta_schedule[0] = 0: the learner drives)")
@@ -177,10 +187,16 @@ def test_retrains_on_the_aggregate_and_rolls_out_the_retrained_learner(student, 
 @stub("dagger", points=1, hint="Create one np.random.default_rng(seed) for the mixture and seed rollouts and training from `seed`.")
 def test_reproducible_under_a_seed(student):
     """Two runs with the same seed and initial learner give the same returns and data set; another seed another run"""
-    (_, first), (_, second) = (_run(student, [0.5, 0.5], episodes=2, seed=7, policy_seed=4) for _ in range(2))
+    # train_bc replaced by the stand-in, which plants the same learner for the second iteration in every run: what is
+    # judged is dagger's own randomness (the mixture's generator and the rollouts' seeds); that train_bc gets
+    # seed + i is test_retrains_on_the_aggregate_and_rolls_out_the_retrained_learner's.
+    def run(seed):
+        return _run(student, [0.5, 0.5], episodes=2, seed=seed, policy_seed=4, trainer=_Trainer([_planted(80)[0]]))[1]
+
+    first, second = run(7), run(7)
     check_array(second["returns"], first["returns"], rtol=0, atol=0, name="the returns of the second run")
     check_array(second["obs"], first["obs"], rtol=0, atol=0, name="the data set of the second run")
-    _, other = _run(student, [0.5, 0.5], episodes=2, seed=8, policy_seed=4)
+    other = run(8)
     assert other["obs"].shape != first["obs"].shape or not np.array_equal(other["obs"], first["obs"]), \
         "a different seed gave the same data set: seed the rollouts and the mixture from `seed`"
 
@@ -189,15 +205,17 @@ def test_reproducible_under_a_seed(student):
 def test_learns_to_drive(student, reference, trusted_copy):
     """Six iterations from a clone of one demonstration: the learner then stays on the track like the expert"""
     # The suite's one learning test of dagger, on the smallest instance that still separates (two episodes an
-    # iteration; four cost twice the time): the reference reaches 99 to 102% of the expert from dagger seeds 1 to 5,
-    # the clone alone 6%.
+    # iteration; four cost twice the time; fewer iterations, fewer epochs, a larger batch or learning rate, or one
+    # episode an iteration each left the reference short of the expert on one seed in five): the reference reaches 99
+    # to 100% of the expert from dagger seeds 0 to 7 (five episodes scored), the clone alone 8%. The clone: 30 epochs
+    # at lr 1e-2 (a third of the 100 at 3e-3 it had, for the same DAgger result).
     demo = _demo()   # the clone is trained on the grader's side, by the reference train_bc, and handed over as weights
-    clone, _ = reference.helpers.train_fresh_policy(demo.obs, demo.actions, hidden=(64, 64), policy_seed=0, n_epochs=100,
-                                                    batch_size=64, lr=3e-3, seed=0)
+    clone, _ = reference.helpers.train_fresh_policy(demo.obs, demo.actions, hidden=(64, 64), policy_seed=0, n_epochs=30,
+                                                    batch_size=64, lr=1e-2, seed=0)
     policy, hist = _run(student, [0.0] * 6, episodes=2, seed=0, hidden=(64, 64),
                         state=reference.helpers.module_state(clone), n_epochs=50, timeout=120)
-    expert = rollout(EXPERT.act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
-    got = rollout(trusted_copy(policy, 4, 1, (64, 64)).act, racetrack.ENV_ID, 10, seed=1000).returns.mean()
+    expert = rollout(EXPERT.act, racetrack.ENV_ID, 5, seed=1000).returns.mean()
+    got = rollout(trusted_copy(policy, 4, 1, (64, 64)).act, racetrack.ENV_ID, 5, seed=1000).returns.mean()
     assert got >= 0.8 * expert, (f"after six iterations the learner earns about {round(100 * got / expert, -1):.0f}% of the "
                                  "expert's return on the grader's episodes; the reference reaches the expert's level "
                                  "(at least 80% is needed)")

@@ -59,9 +59,12 @@ def _history(hist, n_epochs):
 @stub("train_bc", points=2, hint=HINT)
 def test_recovers_a_linear_gaussian_expert(student, trusted_copy, rng):
     """A linear policy trained on 3,000 pairs from a linear-Gaussian expert finds its weights, bias and noise"""
+    # 20 epochs of minibatches of 256 (220 steps; 40 epochs of 128 took 940): the reference over 60 draws of these
+    # inputs is within 0.046 of the weights, 0.022 of the bias and 9.5% of the noise (allowed: 0.06, 0.06, 20%), at a
+    # quarter of the CPU. Fewer pairs do not fit the tolerance: 600 pairs reach 0.060 on the weights.
     W, b, sigma, obs, actions = _linear_expert(rng, 3000)
-    policy, hist = _train(student, obs, actions, n_epochs=40, batch_size=128, lr=3e-2, seed=0)
-    _history(hist, 40)
+    policy, hist = _train(student, obs, actions, n_epochs=20, batch_size=256, lr=3e-2, seed=0)
+    _history(hist, 20)
     learned = trusted_copy(policy, 3, 2)
     check_array(learned.mean.weight.detach().numpy().astype(float), W, atol=0.06, rtol=0, name="the learned weights")
     check_array(learned.mean.bias.detach().numpy().astype(float), b, atol=0.06, rtol=0, name="the learned bias")
