@@ -11,9 +11,11 @@ recorded beside the time, since a figure from the shared 2-core machine means no
 budget, each with its own commit, date and load), so a notebook can be re-measured alone.
 
 ``--write-notebooks`` rewrites, in each solution notebook, the Markdown cell tagged
-``measured-budget`` (right after the parameters cell) from that file; ``make assignments`` carries it
-to the student notebooks, and ``tests/test_notebook_budgets.py`` fails when a notebook's sentence
-differs from what the results file says. Nothing in that cell is typed by hand.
+``measured-budget`` (right after the parameters cell) from that file, and the first line of every
+code cell that ran for ``LONG_CELL`` seconds or more at the full budget (a comment the student reads
+before running it: that cell's own time at both budgets); ``make assignments`` carries both to the
+student notebooks, and ``tests/test_notebook_budgets.py`` fails when a notebook's sentence or a long
+cell's line differs from what the results file says. Nothing in them is typed by hand.
 """
 from __future__ import annotations
 
@@ -35,6 +37,13 @@ OWNED_ELSEWHERE = {"hw2b_adversarial", "hw7_verifier_rl", "hw7b_ai_feedback"}
 """Notebooks whose budgets their own benchmarks measure and state (bench_hw2b/hw7/hw7b): no generated cell."""
 
 
+LONG_CELL = 10.0
+"""Seconds at the full budget from which a code cell states its own running time in its first line."""
+CELL_LINE = "# Measured running time of this cell"
+CELL_LINE_SOURCE = "# (measured at load"
+"""How the two generated lines start: they are rewritten or removed, never kept stale."""
+
+
 def _load(values) -> str:
     return f"{values[0]:.1f}"
 
@@ -54,6 +63,37 @@ def budget_sentence(entry: dict) -> str:
             f"The whole notebook, {part('full', 'full budget')}; {part('fast', 'with `FAST = True`')}.")
 
 
+def _about(seconds: float | None) -> str:
+    if seconds is None:
+        return "under a second"
+    if seconds < 60:
+        return f"about {max(1, round(seconds))} s"
+    minutes = round(seconds / 30) / 2
+    return f"about {minutes:g} min"
+
+
+def cell_line(entry: dict, cell_id: str) -> str | None:
+    """The first lines a code cell shows about its own running time, or None for a cell under ``LONG_CELL``
+    at the full budget (or a notebook whose two budgets are not both measured with per-cell times)."""
+    full, fast = entry.get("full") or {}, entry.get("fast") or {}
+    if "cell_seconds" not in full or "cell_seconds" not in fast:
+        return None
+    seconds = full["cell_seconds"].get(cell_id)
+    if seconds is None or seconds < LONG_CELL:
+        return None
+    return (f"{CELL_LINE}: {_about(seconds)} at the full budget, {_about(fast['cell_seconds'].get(cell_id))} "
+            f"with FAST = True\n{CELL_LINE_SOURCE} {_load(full['meta']['load'])} on the course's 2-core machine, "
+            "bench/results/notebook_budgets.json)")
+
+
+def with_cell_line(source: str, line: str | None) -> str:
+    """``source`` with its generated first lines replaced by ``line`` (added, or removed when None)."""
+    for prefix in (CELL_LINE, CELL_LINE_SOURCE):
+        if source.startswith(prefix):
+            source = source.partition("\n")[2]
+    return source if line is None else f"{line}\n{source}"
+
+
 def measure(assignment: str, fast: bool) -> dict:
     from autograder.authoring.nbrun import run_notebook
 
@@ -66,6 +106,7 @@ def measure(assignment: str, fast: bool) -> dict:
     record = meta([f"solutions/{assignment}", "rlcourse"])
     record["load"] = [round(max(a, b), 2) for a, b in zip(before, os.getloadavg())]  # the busier of start and end
     return {"seconds": round(seconds, 1), "ok": report.ok, "cells": report.cells_run,
+            "cell_seconds": {cell: t for cell, t in report.cell_seconds.items() if t >= 1.0},
             "error": None if report.ok else report.describe(assignment), "meta": record}
 
 
@@ -81,15 +122,20 @@ def write_notebooks(results: dict) -> list[Path]:
         nb = nbformat.read(path, as_version=4)
         text = budget_sentence(entry)
         cell = next((c for c in nb.cells if TAG in c.metadata.get("tags", [])), None)
+        changed = cell is None or cell.source != text
         if cell is None:
             params = next(i for i, c in enumerate(nb.cells) if "parameters" in c.metadata.get("tags", []))
             cell = nbformat.v4.new_markdown_cell(text, metadata={"tags": [TAG]})
             nb.cells.insert(params + 1, cell)
-        elif cell.source == text:
-            continue
         cell.source = text
-        nbformat.write(nb, path)
-        written.append(path)
+        for code in nb.cells:
+            if code.cell_type == "code" and code.get("id"):
+                source = with_cell_line(code.source, cell_line(entry, code.id))
+                changed |= source != code.source
+                code.source = source
+        if changed:
+            nbformat.write(nb, path)
+            written.append(path)
     return written
 
 

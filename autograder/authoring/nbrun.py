@@ -13,7 +13,7 @@ import ast
 import math
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,8 @@ class RunReport:
     error: str = ""
     failed_label: str = ""
     """The failing cell's nbgrader ``grade_id`` (or its tag), when it has one."""
+    cell_seconds: dict[str, float] = field(default_factory=dict)
+    """Wall seconds of each code cell that ran, keyed by its nbformat cell id (benchmarks state them)."""
 
     def describe(self, path: str | Path) -> str:
         if self.ok:
@@ -94,6 +96,7 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
     client = NotebookClient(nb, timeout=timeout, kernel_name="python3", resources={"metadata": {"path": str(cwd)}})
     start, count = time.monotonic(), 0
     report: RunReport | None = None
+    cell_seconds: dict[str, float] = {}
     with client.setup_kernel():
         for index, cell in enumerate(nb.cells):
             if cell.cell_type != "code":
@@ -101,6 +104,7 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
             injected = "injected-parameters" in cell.metadata.get("tags", [])
             count += not injected
             client.timeout = max(1, math.ceil(timeout - (time.monotonic() - start)))
+            cell_start = time.monotonic()
             try:
                 client.execute_cell(cell, index)
             except CellTimeoutError:
@@ -113,6 +117,8 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
                 message = f"{error_output.get('ename', 'Error')}: {error_output.get('evalue', str(err))}"
                 report = RunReport(False, time.monotonic() - start, count, count,
                                    _failing_line(cell.source, error_output.get("traceback", [])), message[:2000])
+            if not injected and cell.get("id"):
+                cell_seconds[cell["id"]] = round(time.monotonic() - cell_start, 2)
             if report is not None:
                 tags = [t for t in cell.metadata.get("tags", []) if t not in ("setup", "check", "experiment")]
                 report.failed_label = cell.metadata.get("nbgrader", {}).get("grade_id") or (tags[0] if tags else "")
@@ -120,4 +126,6 @@ def run_notebook(path: str | Path, parameters: dict[str, Any] | None = None, tim
                 break
     if output is not None:
         nbformat.write(nb, str(output))
-    return report or RunReport(True, time.monotonic() - start, count)
+    report = report or RunReport(True, time.monotonic() - start, count)
+    report.cell_seconds = cell_seconds
+    return report
