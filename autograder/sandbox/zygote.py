@@ -34,6 +34,9 @@ IMPORT_TIME_PROBES = {"gymnasium": ("gymnasium.envs.mujoco.mujoco_rendering",)}
 program (glfw checks its library's version in a child interpreter). A worker reads the course's files
 with the identity of their owner, but a program it starts reads with the worker's own uid (exec resets
 the file-system identity), which a checkout of mode 700 shuts out: such probes must run here, before."""
+LAZY_IMPORTS = {"torch": ("torch._dynamo",)}
+"""Modules a preloaded package imports lazily, on first use, at a cost every worker would pay again: torch
+imports torch._dynamo (about 1 s of CPU) when a submission builds its first optimizer."""
 
 
 def _boot_worker(config: SpawnConfig, fds: list[int], level: str, uid: int, existing: int,
@@ -140,7 +143,9 @@ def main(sock: socket.socket, preload: list[str], grader: int) -> None:
     if os.getppid() != grader:  # the grader died before the line above took effect: nobody will ask for workers
         os._exit(0)
     os.environ.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg")
-    for module in [*preload, *(m for p in preload for m in IMPORT_TIME_PROBES.get(p.split(".")[0], ()))]:
+    extra = [m for p in preload
+             for m in (*IMPORT_TIME_PROBES.get(p.split(".")[0], ()), *LAZY_IMPORTS.get(p.split(".")[0], ()))]
+    for module in [*preload, *extra]:
         try:
             __import__(module)
         except Exception:  # noqa: BLE001 - a module that fails here fails again, visibly, in the worker

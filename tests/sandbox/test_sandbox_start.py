@@ -59,3 +59,19 @@ def test_a_zygote_that_dies_while_importing_is_a_start_error(preload_dir):
             _spawn(zygote)
     finally:
         zygote.close()
+
+
+def test_a_preloaded_torch_brings_what_it_imports_lazily():
+    """torch imports torch._dynamo (about 1 s of CPU) when a submission builds its first optimizer: the zygote
+    imports it once, so that no worker pays it again (plain ``import torch`` does not)."""
+    from autograder.core.session import Cell, Session
+
+    zygote = Zygote(["torch"])
+    probe = Cell("probe", "import sys\nassert 'torch._dynamo' in sys.modules, 'torch._dynamo is not preloaded'")
+    session = Session(zygote, [probe], SpawnConfig(course.sandbox_view(()), course.limits("hw0_setup")))
+    try:
+        session.start()
+        assert session.status["probe"].ok, session.status["probe"].message
+    finally:
+        session.close()
+        zygote.close()
