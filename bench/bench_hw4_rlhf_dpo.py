@@ -482,6 +482,12 @@ def print_preference_only(out: dict) -> None:
         print("Checks of the runs at the chosen KL coefficient, per seed: " + "; ".join(
             f"seed {s}: disagreement {ch['disagreement']:.3f}, learned return {ch['learned_return']:.0f}"
             for s, ch in zip(out["methods"]["RLHF"]["seeds"], out["methods"]["RLHF"]["checks"])))
+    if "guard_check" in out:
+        g = out["guard_check"]
+        print(f"Guard check (declared before its runs; no penalty, {g['steps']:,} steps): " + "; ".join(
+            f"seed {r['seed']}: disagreement {r['check']['disagreement']:.3f} "
+            f"({'covered' if r['covered'] else 'REJECTED'}), learned return {r['check']['learned_return']:.0f}, "
+            f"true return {r['final']['return']:.0f}" for r in g["runs"]))
     print("Beta sweep, seed 0, held-out accuracy: " + "; ".join(
         f"{d}: " + ", ".join(f"{b} → {a:.3f}" for b, a in accs.items()) for d, accs in out["beta_val_accuracy"].items()))
     print("Sweep true returns (read after the choice): " + "; ".join(f"{k}: {v:.0f}" for k, v in out["sweep_true_returns"].items()))
