@@ -31,9 +31,11 @@ setup: $(STAMP)
 demo: setup
 	$(PY) -m autograder demo
 
-## The whole test suite.
+## The whole test suite: over both cores (pytest-xdist, a test file per worker so that its fixtures are built
+## once), then the tests marked serial alone (they time themselves, or starve the CPU on purpose).
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile -m "not serial"
+	$(PY) -m pytest -q -m serial
 
 ## The edit-test loop: everything but the end-to-end tests marked slow (notebook runs, batches, the
 ## security corpus, the site), over both cores (pytest-xdist). CI runs the whole suite (make test).

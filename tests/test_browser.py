@@ -39,6 +39,8 @@ from rlcourse.video import render_rollout
 REPO = Path(__file__).resolve().parents[1]
 BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
 
+pytestmark = pytest.mark.serial  # it measures the wait after a click: make test runs it alone
+
 
 def record(name: str, value) -> None:
     """Add ``value`` under ``name`` to the JSON file ``BROWSER_TIMINGS`` names (nothing when unset)."""

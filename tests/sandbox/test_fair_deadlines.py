@@ -20,6 +20,7 @@ from autograder.core.session import CPU_WAIT_STRETCH
 from conftest import REPO, with_cells
 
 pytestmark = [pytest.mark.slow,  # three gradings on a deliberately starved CPU
+              pytest.mark.serial,  # its hogs would starve whatever ran beside it: make test runs it alone
               pytest.mark.skipif(not os.path.exists("/proc/self/schedstat"),
                                  reason="this kernel does not report run delays: limits are plain wall-clock time")]
 
