@@ -427,6 +427,25 @@ def headline_test_fast(data: dict) -> Headline:
         {"wall_seconds", "cpu_seconds", "counts", "returncode", "load_before", "load_after", "command"}
 
 
+def headline_notebook_budgets(data: dict) -> Headline:
+    books = data.get("notebooks")
+    if not isinstance(books, dict):
+        return [], set()
+
+    def run(entry: dict, budget: str) -> list[str]:
+        r = entry.get(budget) if isinstance(entry.get(budget), dict) else {}
+        load = (r.get("meta") or {}).get("load") or []
+        return [fmt(r.get("seconds")) if r.get("ok") else "–", fmt(round(load[0], 1)) if load else "–"]
+
+    body = [[f"`{cell(name)}`"] + run(entry, "full") + run(entry, "fast") for name, entry in books.items()]
+    text = table(["notebook", "full budget (s)", "load", "`FAST = True` (s)", "load"], body,
+                 ["---", "---:", "---:", "---:", "---:"])
+    note = ("Each solution notebook run top to bottom in a fresh kernel; the load is the busier 1-minute load average of "
+            "the run's start and end, on the course's 2-core machine. Each run's commit and date, and the seconds of "
+            "every cell that took one or more, follow below.")
+    return ["## Running time of each notebook", (text, ""), note], set()
+
+
 Headline = tuple[list[str | tuple[str, str]], set[str]]
 """Blocks (headings and notes as text; tables as (table, section whose meta speaks for it)) and the
 paths of the keys they show, which the generic part then leaves out."""
@@ -438,7 +457,9 @@ HEADLINES: dict[str, Callable[[dict], Headline]] = {
     "hw4_rlhf_dpo": headline_hw4,
     "hw4_dpo_pairs": headline_hw4_dpo_pairs,
     "hw6_group_rl": headline_hw6,
+    "notebook_budgets": headline_notebook_budgets,
     "test_fast": headline_test_fast,
+    "make_test": headline_test_fast,
 }
 
 
