@@ -15,6 +15,11 @@ top of the limit as for every deadline (up to ``CPU_WAIT_STRETCH`` times it), so
 fail an honest submission either. The limits go into the suite's ``limits.json`` under ``"tests"`` (by
 pytest node id), and what they came from under ``"tests_reference"``; a test without one (new or renamed
 since) keeps ``test_seconds``. Run it again after changing a suite's tests.
+
+A re-measure does not loosen a limit by noise: where a test's earlier limit is lower than the new one by at
+most ``NOISE_SECONDS``, the earlier limit and its record stay (listed in ``kept_earlier``, their runs in
+``earlier_measured``). A test that became heavier by more than that gets its new limit; ``--fresh`` drops
+every earlier record.
 """
 from __future__ import annotations
 
@@ -34,6 +39,8 @@ MULTIPLE = 10.0
 """How many times the reference's own time a test may take."""
 CONSTANT = 5.0
 """Seconds every test may take besides (starting stand-ins, a slow first import, a cold cache)."""
+NOISE_SECONDS = 0.5
+"""How much higher a re-measured limit may come out than the earlier one and still count as noise (kept earlier)."""
 SAMPLE = "complete"
 """The sample graded to measure the reference: the solution's own code in a student's notebook."""
 
@@ -69,7 +76,21 @@ def measure(assignment: str, sample: str = SAMPLE) -> tuple[dict[str, dict[str, 
     return stats, {"all": all_passed, "score": result.score, "max_score": result.max_score}, wall
 
 
-def write_limits(assignment: str, dry_run: bool = False) -> dict:
+def keep_earlier(earlier: dict, tests: dict[str, float], reference: dict[str, dict]) -> list[str]:
+    """Where ``earlier`` (a ``limits.json`` as read) gave a test a limit lower than the new one by at most
+    ``NOISE_SECONDS``, put the earlier limit and record back into ``tests`` and ``reference``; the tests kept."""
+    old_tests = earlier.get("tests", {})
+    old_records = earlier.get("tests_reference", {}).get("seconds", {})
+    kept = []
+    for node, limit in tests.items():
+        old = old_tests.get(node)
+        if old is not None and node in old_records and old < limit <= old + NOISE_SECONDS:
+            tests[node], reference[node] = old, old_records[node]
+            kept.append(node)
+    return sorted(kept)
+
+
+def write_limits(assignment: str, dry_run: bool = False, fresh: bool = False) -> dict:
     """Measure ``assignment``'s reference and write its per-test limits; what was written."""
     base = course.limits(assignment)
     stats, outcome, wall = measure(assignment)
@@ -88,13 +109,19 @@ def write_limits(assignment: str, dry_run: bool = False) -> dict:
                            "worker_cpu": round(s.get("worker_cpu", 0.0), 3), "messages": int(s.get("messages", 0))}
     path = course.suite_dir(assignment) / "limits.json"
     raw = json.loads(path.read_text()) if path.exists() else {}
+    earlier = {} if fresh else raw
+    kept = keep_earlier(earlier, tests, reference)
+    previous = earlier.get("tests_reference", {})
+    earlier_runs = [m for m in [previous.get("measured"), *previous.get("earlier_measured", [])] if m] if kept else []
     raw["tests"] = tests
     raw["tests_reference"] = {
         "rule": f"min(test_seconds, {MULTIPLE:g} * own + {CONSTANT:g}) s, own = the test's span less the worker's "
-                "and the grader's CPU wait, from the complete sample graded once (autograder/authoring/limits.py)",
+                "and the grader's CPU wait, from the complete sample graded once (autograder/authoring/limits.py); "
+                f"a re-measure at most {NOISE_SECONDS:g} s higher keeps the earlier, lower limit (never loosened by "
+                "noise): the tests in kept_earlier, from one of the runs in earlier_measured",
         "measured": {"commit": _commit(), "date": datetime.date.today().isoformat(), "load": list(os.getloadavg()),
                      "machine": "2-core CPU", "grading_seconds": round(wall, 2), "test_seconds": base.test_seconds},
-        "seconds": reference}
+        "seconds": reference, "earlier_measured": earlier_runs, "kept_earlier": kept}
     if not dry_run:
         path.write_text(json.dumps(raw, indent=1) + "\n")
     return raw
@@ -111,13 +138,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("ids", nargs="*")
     parser.add_argument("--all", action="store_true", help="every assignment with a suite")
     parser.add_argument("--dry-run", action="store_true", help="print the limits, write nothing")
+    parser.add_argument("--fresh", action="store_true", help="no earlier limit kept, however close (NOISE_SECONDS)")
     args = parser.parse_args(argv)
     ids = [i for i in course.assignment_ids() if course.suite_dir(i).is_dir()] if args.all else args.ids
     if not ids:
         parser.error("name an assignment, or --all")
     for assignment in ids:
         course.check_assignment(assignment)
-        raw = write_limits(assignment, args.dry_run)
+        raw = write_limits(assignment, args.dry_run, args.fresh)
         limits = raw["tests"]
         longest = max(limits.values(), default=0.0)
         print(f"{assignment}: {len(limits)} tests, limits {min(limits.values(), default=0.0):.1f}-{longest:.1f} s "

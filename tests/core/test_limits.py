@@ -100,3 +100,16 @@ def test_written_limits_cover_every_test_and_the_grader_reads_them(course_copy):
     finally:
         grader.close()
     assert result.score == result.max_score, [t.message for s in result.stubs for t in s.tests if not t.passed]
+
+
+def test_a_re_measure_keeps_an_earlier_limit_lower_by_noise_only():
+    """A limit re-measured a little higher keeps the earlier one; a test that became heavier gets its new limit."""
+    earlier = {"tests": {"a": 5.2, "b": 6.0, "c": 9.0},
+               "tests_reference": {"seconds": {"a": {"own": 0.012}, "b": {"own": 0.1}, "c": {"own": 0.4}}}}
+    tests = {"a": 5.4, "b": 9.0, "c": 8.0, "d": 5.1}
+    reference = {k: {"own": 0.0} for k in tests}
+    kept = authoring_limits.keep_earlier(earlier, tests, reference)
+    assert kept == ["a"]
+    assert tests == {"a": 5.2, "b": 9.0, "c": 8.0, "d": 5.1}, "only a noise-sized rise is undone; a fall always lands"
+    assert reference["a"] == {"own": 0.012} and reference["b"] == {"own": 0.0}
+    assert authoring_limits.keep_earlier({}, dict(tests), dict(reference)) == []
