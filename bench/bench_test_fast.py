@@ -70,6 +70,7 @@ def run(durations: int, target: str = "test-fast", cwd: Path = REPO) -> dict:
     return {"command": f"make {target}", "returncode": proc.returncode, "wall_seconds": round(wall, 1),
             "cpu_seconds": round((cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime), 1),
             "load_before": list(before), "load_after": list(after), "pytest_runs": pytest_runs(output),
+            "failures": [line.strip() for line in output.splitlines() if line.startswith(("FAILED ", "ERROR "))][:50],
             **parse_summary(output)}
 
 
