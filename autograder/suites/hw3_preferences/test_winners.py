@@ -74,10 +74,15 @@ def test_condorcet_none(student, rng):
 
 @stub("condorcet_winner", points=1, hint=C_HINT)
 def test_condorcet_random_matches_reference(student, reference, rng):
-    """Random preference matrices (most without a Condorcet winner)"""
-    for _ in range(6):
+    """Random preference matrices (most without a Condorcet winner, one with a planted one)"""
+    for i in range(6):
         A = rng.random((5, 5))
         P = np.triu(A, 1) + np.tril(1 - A.T, -1) + 0.5 * np.eye(5)
+        if i == 5:  # a winner planted in the last one: on some draws no random matrix has one, and None passed them all
+            k = rng.integers(5)
+            others = np.arange(5) != k
+            P[k, others] = 0.5 + 0.5 * rng.uniform(0.05, 1.0, 4)
+            P[others, k] = 1.0 - P[k, others]
         want, got = reference.condorcet_winner(P), student.condorcet_winner(P)
         assert got == want and (got is None) == (want is None), (
             f"{_shown(got)} is wrong for P =\n{P.round(2)}\n"
