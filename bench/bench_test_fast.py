@@ -34,17 +34,6 @@ PYTEST_TIME = re.compile(r"\bin ([\d.]+)s\b")
 COUNT = re.compile(r"(\d+) (passed|failed|skipped|deselected|errors?|xfailed|xpassed|warnings?)")
 DURATION = re.compile(r"^\s*([\d.]+)s (call|setup|teardown)\s+(\S+)", re.M)
 
-def parse_summary(output: str) -> dict:
-    """pytest's counts from its last summary line ("370 passed, 45 deselected in 112.3s")."""
-    lines = [line for line in output.splitlines() if re.search(r"\b(passed|failed|error)", line) and " in " in line]
-    counts = {}
-    if lines:
-        for number, word in COUNT.findall(lines[-1]):
-            counts[word.rstrip("s") if word.startswith(("error", "warning")) else word] = int(number)
-    slowest = [{"seconds": float(s), "phase": phase, "test": test} for s, phase, test in DURATION.findall(output)]
-    return {"counts": counts, "summary_line": lines[-1].strip("= ") if lines else None, "slowest": slowest}
-
-
 def pytest_runs(output: str) -> list[dict]:
     """Each pytest invocation's summary line, counts and own seconds (``make test`` runs two)."""
     lines = [line for line in output.splitlines()
@@ -55,6 +44,13 @@ def pytest_runs(output: str) -> list[dict]:
         runs.append({"summary_line": line.strip("= "), "counts": counts,
                      "seconds": float(PYTEST_TIME.search(line)[1])})
     return runs
+
+
+def parse_summary(output: str) -> dict:
+    """pytest's counts from its last summary line ("370 passed, 45 deselected in 112.3s"), and the slowest tests."""
+    last = (pytest_runs(output) or [{"counts": {}, "summary_line": None}])[-1]
+    slowest = [{"seconds": float(s), "phase": phase, "test": test} for s, phase, test in DURATION.findall(output)]
+    return {"counts": last["counts"], "summary_line": last["summary_line"], "slowest": slowest}
 
 
 def run(durations: int, target: str = "test-fast", cwd: Path = REPO) -> dict:
