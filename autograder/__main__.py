@@ -221,7 +221,8 @@ def _cmd_new(args: argparse.Namespace) -> int:
     for path in create(args.assignment, args.title):
         print(f"wrote {path}")
     print(f"next: replace the two stubs in solutions/{args.assignment}/, then `python -m autograder assignments "
-          f"{args.assignment}` and `python -m autograder samples {args.assignment}` (CONTRIBUTING.md)")
+          f"{args.assignment}`, `python -m autograder samples {args.assignment}` and `python -m "
+          f"autograder.authoring.limits {args.assignment}` (CONTRIBUTING.md)")
     return 0
 
 

@@ -143,7 +143,9 @@ def mean_return(rewards, gamma):
 
 
 def create(assignment: str, title: str = "a new assignment") -> list[Path]:
-    """Write the skeleton of ``assignment`` (refusing to overwrite one), its student notebook and samples."""
+    """Write the skeleton of ``assignment`` (refusing to overwrite one), its student notebook, samples and
+    per-test limits (so that its looping sample costs seconds, not ``call_seconds`` a stub)."""
+    from autograder.authoring.limits import write_limits
     from autograder.authoring.release import generate_assignments
     from autograder.authoring.samples import write_samples
 
@@ -166,4 +168,6 @@ def create(assignment: str, title: str = "a new assignment") -> list[Path]:
     written += [suite / "trivial_answers.py", suite / "equivalent_mutants.json"]
     written += generate_assignments([assignment])
     written += write_samples(assignment)
+    write_limits(assignment)
+    written.append(course.suite_dir(assignment) / "limits.json")
     return written

@@ -1,5 +1,5 @@
 """``python -m autograder new ID`` makes an assignment the whole kit accepts (issue 33): in a copy of the
-course, the new skeleton passes the fast tests and its own slow ones (its notebook runs, its samples grade
+course, the new skeleton passes the fast tests that read the whole course and its own slow ones (its notebook runs, its samples grade
 as their expected.json says, its trivial answers earn nothing)."""
 from __future__ import annotations
 
@@ -53,6 +53,15 @@ def test_new_writes_an_assignment_that_passes(tmp_path):
     assert own.returncode == 0, own.stdout[-4000:]
     summary = own.stdout.strip().splitlines()[-1]
     assert int(summary.split(" passed")[0].split()[-1]) >= 4, f"the new assignment's own tests did not run: {summary}"
+    assert (copy / f"autograder/suites/{NEW}/limits.json").exists(), "new wrote no per-test limits"
     fast = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "not slow", "-x",
-                           "tests"], cwd=copy, env=env, capture_output=True, text=True, timeout=1800)
+                           *COURSE_WIDE], cwd=copy, env=env, capture_output=True, text=True, timeout=1800)
     assert fast.returncode == 0, fast.stdout[-4000:]
+
+
+COURSE_WIDE = ("tests/authoring", "tests/lectures", "tests/test_readme.py", "tests/test_notebook_budgets.py",
+               "tests/test_numbers_pages.py", "tests/test_packaging.py", "tests/core/test_given_code.py",
+               "tests/core/test_suite_helpers.py", "tests/core/test_adversarial_suites.py",
+               "tests/outputs/test_prairielearn.py")
+"""The fast tests that read the whole course (every notebook, suite, lecture and page): the ones a new assignment can
+break. The rest test the grader's machinery on the fixture course, which a new assignment does not touch."""
