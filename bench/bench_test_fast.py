@@ -30,6 +30,8 @@ sys.path.insert(0, str(REPO))
 from bench.run_record import meta  # noqa: E402
 RESULTS = REPO / "bench" / "results" / "test_fast.json"
 MAKE_TEST_RESULTS = REPO / "bench" / "results" / "make_test.json"
+LAST_RUN = REPO / "build" / "bench" / "make_test_last.json"
+"""The last --make-test run, recorded or not (build/ is not committed)."""
 PYTEST_TIME = re.compile(r"\bin ([\d.]+)s\b")
 COUNT = re.compile(r"(\d+) (passed|failed|skipped|deselected|errors?|xfailed|xpassed|warnings?)")
 DURATION = re.compile(r"^\s*([\d.]+)s (call|setup|teardown)\s+(\S+)", re.M)
@@ -100,6 +102,10 @@ def main() -> None:
               + "; ".join(r["summary_line"] for r in record["pytest_runs"])
               + f" (exit {record['returncode']}, load {record['load_before'][0]:.1f} before, "
               f"{record['load_after'][0]:.1f} after)")
+        for line in record["failures"]:
+            print(line)
+        LAST_RUN.parent.mkdir(parents=True, exist_ok=True)
+        LAST_RUN.write_text(json.dumps(record, indent=1) + "\n")  # kept unrecorded too: its failures and durations
         if args.record:
             MAKE_TEST_RESULTS.write_text(json.dumps(record, indent=1) + "\n")
             print(f"wrote {MAKE_TEST_RESULTS.relative_to(REPO)}")

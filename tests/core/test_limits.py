@@ -47,6 +47,7 @@ def test_per_test_keys_are_not_limits_fields(course_copy):
     path.write_text(json.dumps({**raw, "tests": {"test_fx.py::test_mean_of": 2.5}, "tests_reference": {"rule": "x"}}))
     assert course.limits("fx").call_seconds == raw["call_seconds"]
     assert course.per_test_limits("fx") == {"test_fx.py::test_mean_of": 2.5}
+    (course_copy / "autograder/suites/ex/limits.json").unlink()  # a suite without limits.json: no per-test limit
     assert course.per_test_limits("ex") == {}
 
 
