@@ -48,7 +48,8 @@ def differences(results: list[GradeResult], expected: dict[str, dict[str, str]])
 
 
 def run_demo(out: Path, jobs: int = 2) -> int:
-    """Batch-grade ``autograder/samples/<id>/`` for every assignment that has samples; print each gradebook.
+    """Batch-grade ``autograder/samples/<id>/`` for every assignment that has samples (in one batch); print each
+    gradebook.
 
     Returns non-zero when any sample grades differently from its ``expected.json``.
     """
@@ -56,9 +57,11 @@ def run_demo(out: Path, jobs: int = 2) -> int:
     if not ids:
         raise SystemExit("no assignment has sample submissions yet (python -m autograder samples ID)")
     problems = []
+    # one batch over all of them: its processes import the grader once, not once per assignment
+    graded = grade_folder(ids, course.samples_dir(ids[0]).parent, Path(out), jobs=jobs)
     for assignment in ids:
         target = Path(out) / assignment
-        results = grade_folder(assignment, course.samples_dir(assignment), target, jobs=jobs)
+        results = graded[assignment]
         print(f"\n{assignment}: gradebook {target / GRADEBOOK_NAME}\n")
         print(_table(target / GRADEBOOK_NAME))
         print(f"\nper-student feedback: {target}/<submission>/{FEEDBACK_NAME} "

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -14,10 +17,9 @@ pytestmark = pytest.mark.slow  # end-to-end: make test-fast leaves it out, make 
 WITH_SAMPLES = [i for i in course.assignment_ids() if (course.samples_dir(i) / "expected.json").exists()]
 
 
-def _check(assignment, open_tmp):
+def _check(assignment, results):
     expected = json.loads((course.samples_dir(assignment) / "expected.json").read_text())
-    results = {r.submission: r for r in grade_folder(assignment, course.samples_dir(assignment), open_tmp / "out",
-                                                  jobs=2, progress=False)}
+    results = {r.submission: r for r in results}
     assert set(results) == set(expected)
     for sample, outcome in expected.items():
         for stub in results[sample].stubs:
@@ -26,16 +28,28 @@ def _check(assignment, open_tmp):
                 (sample, stub.name, [t.message for t in stub.tests if not t.passed][:2])
 
 
+@pytest.fixture(scope="module")
+def graded():
+    """Every assignment's samples graded as ``make demo`` grades them: one batch over all the assignments, whose
+    processes pay the grader's imports once."""
+    out = Path(tempfile.mkdtemp(prefix="rlcourse-test-", dir="/tmp"))  # as conftest's open_tmp, for the module
+    out.chmod(0o777)
+    try:
+        yield grade_folder(WITH_SAMPLES, course.samples_dir(WITH_SAMPLES[0]).parent, out, jobs=2, progress=False)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+
+
 @pytest.mark.parametrize("assignment", WITH_SAMPLES)
-def test_samples_score_as_expected(assignment, open_tmp):
-    _check(assignment, open_tmp)
+def test_samples_score_as_expected(assignment, graded):
+    _check(assignment, graded[assignment])
 
 
 def test_the_worked_example_of_contributing_scores_as_expected(open_tmp, monkeypatch):
     """CONTRIBUTING.md's two-stub example (``ex`` in the fixture course) passes the same check."""
     monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
     monkeypatch.setenv("RLCOURSE_REPO", str(FIXTURE_COURSE))  # for the spawned grading processes
-    _check("ex", open_tmp)
+    _check("ex", grade_folder("ex", course.samples_dir("ex"), open_tmp / "out", jobs=2, progress=False))
 
 
 MUTANTS = {  # CONTRIBUTING.md's table: each mutant of the worked example and its (softmax, cross_entropy) score
