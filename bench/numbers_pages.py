@@ -417,14 +417,22 @@ def headline_test_fast(data: dict) -> Headline:
     if "wall_seconds" not in data:
         return [], set()
     counts = data.get("counts") if isinstance(data.get("counts"), dict) else {}
-    body = [[f"`{cell(str(data.get('command', 'make test-fast')))}`", fmt(data.get("wall_seconds")), fmt(data.get("cpu_seconds")),
+    runs = [r for r in data.get("pytest_runs", []) if isinstance(r, dict)]
+    body = [[f"`{cell(str(data.get('command', 'make test-fast')))}`", fmt(data.get("wall_seconds")),
+             " + ".join(fmt(r.get("seconds")) for r in runs) or "–", fmt(data.get("setup_and_other_seconds", "–")),
+             fmt(data.get("cpu_seconds")),
+             f"{fmt(data['machine_busy_seconds'])} / {fmt(data.get('machine_idle_seconds'))}"
+             if "machine_busy_seconds" in data else "–",
              ", ".join(f"{fmt(v)} {k}" for k, v in counts.items()), fmt(data.get("returncode")),
              fmt([round(v, 2) for v in data.get("load_before", []) if is_number(v)]),
              fmt([round(v, 2) for v in data.get("load_after", []) if is_number(v)])]]
-    return ["## The edit-test loop", (table(["command", "wall (s)", "CPU of its child processes (s)", "tests", "exit status",
-                                             "load before", "load after"], body, ["---", "---:", "---:", "---", "---:", "---", "---"]),
-                                      "")], \
-        {"wall_seconds", "cpu_seconds", "counts", "returncode", "load_before", "load_after", "command"}
+    heading = ["command", "wall (s)", "pytest's own (s), each run", "set-up and the rest (s)",
+               "CPU of its child processes (s)", "machine busy / idle CPU (s)", "tests (last run)", "exit status",
+               "load before", "load after"]
+    return ["## The edit-test loop", (table(heading, body, ["---", "---:", "---:", "---:", "---:", "---:", "---", "---:",
+                                                           "---", "---"]), "")], \
+        {"wall_seconds", "cpu_seconds", "counts", "returncode", "load_before", "load_after", "command",
+         "setup_and_other_seconds", "machine_busy_seconds", "machine_idle_seconds"}
 
 
 def headline_notebook_budgets(data: dict) -> Headline:
