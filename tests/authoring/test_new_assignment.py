@@ -1,6 +1,6 @@
 """``python -m autograder new ID`` makes an assignment the whole kit accepts (issue 33): in a copy of the
-course, the new skeleton passes the fast tests that read the whole course and its own slow ones (its notebook runs, its samples grade
-as their expected.json says, its trivial answers earn nothing)."""
+course, the new skeleton passes the fast tests that read the whole course and its own slow ones (its notebook
+runs, its samples grade as their expected.json says, its trivial answers earn nothing)."""
 from __future__ import annotations
 
 import os
@@ -17,6 +17,12 @@ pytestmark = pytest.mark.slow
 
 NEW = "hw9_example"
 LEFT_OUT = (".venv", ".git", "build", "lectures/_build", "__pycache__", ".pytest_cache")
+COURSE_WIDE = ("tests/authoring", "tests/lectures", "tests/test_readme.py", "tests/test_notebook_budgets.py",
+               "tests/test_numbers_pages.py", "tests/test_packaging.py", "tests/core/test_given_code.py",
+               "tests/core/test_suite_helpers.py", "tests/core/test_adversarial_suites.py",
+               "tests/outputs/test_prairielearn.py")
+"""The fast tests that read the whole course (every notebook, suite, lecture and page): the ones a new assignment can
+break. The rest test the grader's machinery on the fixture course, which a new assignment does not touch."""
 
 
 def _copy_course(target: Path) -> None:
@@ -58,10 +64,3 @@ def test_new_writes_an_assignment_that_passes(tmp_path):
                            *COURSE_WIDE], cwd=copy, env=env, capture_output=True, text=True, timeout=1800)
     assert fast.returncode == 0, fast.stdout[-4000:]
 
-
-COURSE_WIDE = ("tests/authoring", "tests/lectures", "tests/test_readme.py", "tests/test_notebook_budgets.py",
-               "tests/test_numbers_pages.py", "tests/test_packaging.py", "tests/core/test_given_code.py",
-               "tests/core/test_suite_helpers.py", "tests/core/test_adversarial_suites.py",
-               "tests/outputs/test_prairielearn.py")
-"""The fast tests that read the whole course (every notebook, suite, lecture and page): the ones a new assignment can
-break. The rest test the grader's machinery on the fixture course, which a new assignment does not touch."""
