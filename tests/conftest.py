@@ -22,13 +22,23 @@ def fixture_course(monkeypatch: pytest.MonkeyPatch) -> Path:
     return FIXTURE_COURSE
 
 
-@pytest.fixture
-def open_tmp() -> Path:
-    """A temporary folder that an unprivileged user may write (pytest's own tmp_path is private to root)."""
+def _open_folder():
     path = Path(tempfile.mkdtemp(prefix="rlcourse-test-", dir="/tmp"))
     path.chmod(0o777)
     yield path
     shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture
+def open_tmp() -> Path:
+    """A temporary folder that an unprivileged user may write (pytest's own tmp_path is private to root)."""
+    yield from _open_folder()
+
+
+@pytest.fixture(scope="module")
+def open_module_tmp() -> Path:
+    """:func:`open_tmp` for a whole test module (a batch graded once for all its tests)."""
+    yield from _open_folder()
 
 
 def with_cells(source_nb: Path, out: Path, replacements: dict[str, str | None]) -> Path:

@@ -58,7 +58,7 @@ def run_demo(out: Path, jobs: int = 2) -> int:
         raise SystemExit("no assignment has sample submissions yet (python -m autograder samples ID)")
     problems = []
     # one batch over all of them: its processes import the grader once, not once per assignment
-    graded = grade_folder(ids, course.samples_dir(ids[0]).parent, Path(out), jobs=jobs)
+    graded = grade_folder(ids, course.samples_root(), Path(out), jobs=jobs)
     for assignment in ids:
         target = Path(out) / assignment
         results = graded[assignment]

@@ -35,8 +35,13 @@ def common_helpers() -> Path:
     return REPO / "autograder" / "suites" / "sandbox_common.py"
 
 
+def samples_root() -> Path:
+    """``autograder/samples/``: a folder of sample submissions per assignment."""
+    return REPO / "autograder" / "samples"
+
+
 def samples_dir(assignment: str) -> Path:
-    return REPO / "autograder" / "samples" / assignment
+    return samples_root() / assignment
 
 
 def check_assignment(assignment: str) -> None:

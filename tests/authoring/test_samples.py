@@ -2,9 +2,6 @@
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
-from pathlib import Path
 
 import pytest
 
@@ -29,18 +26,13 @@ def _check(assignment, results):
 
 
 @pytest.fixture(scope="module")
-def graded(request):
+def graded(request, open_module_tmp):
     """The samples of every assignment whose test was selected (``-k hw3`` grades hw3's alone), graded as ``make
     demo`` grades them: one batch over all of them, whose processes pay the grader's imports once."""
     selected = {item.callspec.params["assignment"] for item in request.session.items
                 if item.originalname == "test_samples_score_as_expected"}
-    out = Path(tempfile.mkdtemp(prefix="rlcourse-test-", dir="/tmp"))  # as conftest's open_tmp, for the module
-    out.chmod(0o777)
-    try:
-        yield grade_folder([a for a in WITH_SAMPLES if a in selected], course.samples_dir(WITH_SAMPLES[0]).parent, out,
-                           jobs=2, progress=False)
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
+    return grade_folder([a for a in WITH_SAMPLES if a in selected], course.samples_root(), open_module_tmp,
+                        jobs=2, progress=False)
 
 
 @pytest.mark.parametrize("assignment", WITH_SAMPLES)
