@@ -1,6 +1,7 @@
 """What one message between the grader and a sandbox worker costs: a lent object's round trip and a plain call.
 
-    python bench/bench_channel.py --label before|after [--record] [--repeats 5] [--n 4000]
+    python bench/bench_channel.py --label LABEL [--record] [--repeats 5] [--n 4000]
+    python bench/bench_channel.py --summarise NAME [--pairs 1,2,3]
 
 hw3's RUCB tests lend an environment to the student's ``rucb`` (``autograder.suite.lend``): every
 ``env.duel(c, d)`` in the worker is a callback message to the grader, which runs the method and answers.
@@ -12,7 +13,9 @@ A complete hw3 submission makes about 26,000 of them. This bench measures, in a 
   numpy ints (a student's ``np.argmax``), inside one grader request with a deadline, as in a test;
 * **pipe floor**: the same ping-pong with no protocol at all (a bare Python echo process, one ``os.read``
   and one ``os.write`` a side): what the kernel and the interpreter cost per round trip on this machine at
-  this load, under any protocol;
+  this load, under any protocol; left to the scheduler (which on an idle machine puts the two on different
+  CPUs) and with both pinned to one CPU (as the grader pins a worker while its callbacks come quickly,
+  ``autograder.core.pairing``);
 * **plain call**: the grader calls a worker function ``ident(x)`` ``n`` times, one request each, with
   ``x`` a Python int and an 8-element float64 array.
 
@@ -31,9 +34,11 @@ The settings are fixed here, before any run: ``N`` round trips per repeat, ``REP
 two argument kinds, the two plain-call values, ``PIECE_ITERATIONS`` iterations per piece.
 ``--record`` merges this run under ``--label`` into ``bench/results/channel.json`` with its ``meta``.
 
-Before and after a change, on a loaded machine, alternate the two (the earlier commit's grader from
+Before and after a change, alternate the two (the earlier commit's grader from
 ``git archive COMMIT autograder rlcourse ... | tar -x -C DIR``, this script copied into ``DIR/bench``, run with
-``PYTHONPATH=DIR BENCH_COMMIT=COMMIT`` and ``--out`` this file) so that each pair meets about the same load.
+``PYTHONPATH=DIR BENCH_COMMIT=COMMIT`` and ``--out`` this file) as ``before-i`` and ``after-i``, so that each pair
+meets about the same load; then ``--summarise NAME --pairs i,j,...`` writes their side-by-side summary under
+``paired_summaries`` in the results file.
 """
 from __future__ import annotations
 
@@ -150,6 +155,7 @@ def end_to_end(n: int, repeats: int) -> dict:
         for as_numpy in (False, True):
             kind = "numpy_int_args" if as_numpy else "python_int_args"
             lent, local = [], []
+            pinnings = getattr(getattr(session, "pair", None), "pinnings", None)  # an earlier grader has no pairing
             for _ in range(repeats):
                 session.begin_test()
                 lent.append(measure(session, lambda: student.duels(Lend(Env(), ("duel",), ("n_arms",)), n, as_numpy,
@@ -158,6 +164,8 @@ def end_to_end(n: int, repeats: int) -> dict:
                 session.end_test()
             loop = statistics.median(per_op(local, n, "worker_cpu"))
             row = {key: summary(per_op(lent, n, key)) for key in KEYS}
+            if pinnings is not None:
+                row["pinnings"] = session.pair.pinnings - pinnings
             row["worker_own_loop_cpu"] = summary(per_op(local, n, "worker_cpu"))
             overhead = [g + w - loop for g, w in zip(per_op(lent, n, "grader_cpu"), per_op(lent, n, "worker_cpu"))]
             row["overhead_cpu_both_sides"] = summary(overhead)
@@ -196,14 +204,22 @@ while True:
 """
 
 
-def pipe_floor(n: int, repeats: int) -> dict:
+def pipe_floor(n: int, repeats: int, one_cpu: bool = False) -> dict:
     """The floor under any protocol: a 32-byte ping-pong over two pipes with a bare Python echo process (one
-    blocking read and one write a side, no encoding, no deadline), CPU per round trip on both sides."""
+    blocking read and one write a side, no encoding, no deadline), CPU per round trip on both sides; with
+    ``one_cpu``, this thread and the echo process pinned to the CPU this thread is on."""
     to_r, to_w = os.pipe()
     from_r, from_w = os.pipe()
     child = subprocess.Popen([sys.executable, "-c", ECHO, str(to_r), str(from_w)], pass_fds=(to_r, from_w))
     os.close(to_r), os.close(from_w)
     samples = []
+    mask = os.sched_getaffinity(0)
+    if one_cpu:
+        from autograder.core.pairing import _getcpu
+
+        cpu = _getcpu() if _getcpu is not None else min(mask)
+        os.sched_setaffinity(child.pid, {cpu})
+        os.sched_setaffinity(0, {cpu})
     try:
         message = b"x" * 32
         for _ in range(repeats + 1):
@@ -216,6 +232,7 @@ def pipe_floor(n: int, repeats: int) -> dict:
             c1, d1 = schedstat(child.pid)
             samples.append({"grader_cpu": g1 - g0, "worker_cpu": c1 - c0, "worker_run_delay": d1 - d0, "wall": t1 - t0})
     finally:
+        os.sched_setaffinity(0, mask)
         os.close(to_w)
         child.wait()
         os.close(from_r)
@@ -248,9 +265,12 @@ def count_grader_side(session, student, n: int = 500) -> dict:
     for owner, name, label in ((wire, "_wait", "poll waits"), (supervisor.WorkerProcess, "cpu_wait", "/proc schedstat reads"),
                                (wire, "seconds_left", "deadline checks"), (wire.os, "write", "os.write"),
                                (wire.os, "readv", "os.readv"), (wire.json, "dumps", "json.dumps"),
-                               (wire.json, "loads", "json.loads"), (session_module, "encode", "encode (session)"),
+                               (wire.json, "loads", "json.loads"), (wire, "_decode_header", "header decodes"),
+                               (wire.FrameReader, "ready", "idle checks (pinned)"),
+                               (session_module, "encode", "encode (session)"),
                                (session_module, "decode", "decode (session)")):
-        wrap(owner, name, label)
+        if hasattr(owner, name):  # an earlier commit's grader may lack a piece
+            wrap(owner, name, label)
     try:
         session.begin_test()
         student.duels(Lend(Env(), ("duel",), ()), n, False, timeout=600)
@@ -288,6 +308,8 @@ def pieces(iterations: int) -> dict:
         out["header with the wire's kept JSON encoder"] = timed(lambda: wire._JSON.encode(dict(header, nblobs=0)).encode())
     raw = json.dumps(dict(header, nblobs=0)).encode()
     out["json.loads callback header"] = timed(lambda: json.loads(raw.decode()))
+    if hasattr(wire, "_decode_header"):
+        out["the wire's header decoder"] = timed(lambda: wire._decode_header(raw.decode()))
     out["frame pack (struct + join)"] = timed(lambda: b"".join([struct.pack(">I", len(raw)), raw]))
     r, w = os.pipe()
     try:
@@ -332,13 +354,15 @@ def pieces(iterations: int) -> dict:
     return out
 
 
-def summarise(path: Path) -> dict:
-    """The paired runs (``before-i`` / ``after-i``) of ``path`` side by side: per case, the median CPU overhead
-    per round trip (both sides) of each run, with the load average (1 min) it started at."""
+def summarise(path: Path, only: list[str] | None = None) -> dict:
+    """The paired runs (``before-i`` / ``after-i``; those with ``i`` in ``only`` where given) of ``path`` side by
+    side: per case, the median CPU overhead per round trip (both sides) of each run, with the load average
+    (1 min) it started at."""
     data = json.loads(path.read_text())
     runs = data.get("runs", {})
     pairs = sorted({label.split("-", 1)[1] for label in runs if label.startswith("before-")}
                    & {label.split("-", 1)[1] for label in runs if label.startswith("after-")})
+    pairs = [p for p in pairs if only is None or p in only]
     cases = [c for c in runs[f"before-{pairs[0]}"]["end_to_end_us"] if "overhead_cpu_both_sides" in
              runs[f"before-{pairs[0]}"]["end_to_end_us"][c]] if pairs else []
     out = {}
@@ -352,7 +376,8 @@ def summarise(path: Path) -> dict:
     loads = {f"{side}-{p}": round(runs[f"{side}-{p}"]["meta"]["load"][0], 2) for p in pairs for side in ("before", "after")}
     floor = [runs[f"after-{p}"]["pipe_floor_us"]["overhead_cpu_both_sides"]["median"] for p in pairs
              if "pipe_floor_us" in runs[f"after-{p}"]]
-    return {"pairs": len(pairs), "cases": out, "load_at_start": loads,
+    commits = {side: sorted({runs[f"{side}-{p}"]["meta"].get("commit") for p in pairs}) for side in ("before", "after")}
+    return {"pairs": len(pairs), "commits": commits, "cases": out, "load_at_start": loads,
             "pipe_floor_us_median": round(statistics.median(floor), 2) if floor else None,
             "target_us": TARGET_US,
             "lent_round_trip_within_target": {case: row["after_us"]["median"] <= TARGET_US for case, row in out.items()
@@ -362,8 +387,10 @@ def summarise(path: Path) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--label", help="where this run goes in the results file (before-1, after-1, ...)")
-    parser.add_argument("--summarise", action="store_true",
-                        help="only write the paired summary of the runs in --out (before-i against after-i)")
+    parser.add_argument("--summarise", metavar="NAME",
+                        help="only write, under this name, the paired summary of the runs in --out (before-i against "
+                             "after-i, for the i in --pairs)")
+    parser.add_argument("--pairs", help="comma-separated: which pairs --summarise takes (default all)")
     parser.add_argument("--n", type=int, default=N)
     parser.add_argument("--repeats", type=int, default=REPEATS)
     parser.add_argument("--record", action="store_true")
@@ -372,9 +399,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.summarise:
         data = json.loads(args.out.read_text())
-        data["paired_summary"] = summarise(args.out)
+        summary_ = summarise(args.out, args.pairs.split(",") if args.pairs else None)
+        data.setdefault("paired_summaries", {})[args.summarise] = summary_
         args.out.write_text(json.dumps(data, indent=1) + "\n")
-        print(json.dumps(data["paired_summary"], indent=1))
+        print(json.dumps(summary_, indent=1))
         return
     if not args.label:
         parser.error("--label is needed to run")
@@ -382,6 +410,7 @@ def main() -> None:
     result = {"meta": run_meta, "settings": {"n": args.n, "repeats": args.repeats,
                                               "piece_iterations": PIECE_ITERATIONS},
               "pipe_floor_us": pipe_floor(args.n, args.repeats),
+              "pipe_floor_one_cpu_us": pipe_floor(args.n, args.repeats, one_cpu=True),
               "end_to_end_us": end_to_end(args.n, args.repeats),
               "pieces_us_cpu": pieces(PIECE_ITERATIONS)}
     result["meta"]["load_at_end"] = list(os.getloadavg())
@@ -390,10 +419,11 @@ def main() -> None:
             print(f"{name}: overhead {row['overhead_cpu_both_sides']['median']:.1f} µs CPU per round trip "
                   f"(grader {row['grader_cpu']['median']:.1f}, worker {row['worker_cpu']['median']:.1f}), "
                   f"wall {row['wall']['median']:.1f} µs, worker run delay {row['worker_run_delay']['median']:.1f} µs")
-    floor = result["pipe_floor_us"]
-    print(f"pipe ping-pong floor: {floor['overhead_cpu_both_sides']['median']:.1f} µs CPU per round trip "
-          f"(parent {floor['grader_cpu']['median']:.1f}, echo {floor['worker_cpu']['median']:.1f}), "
-          f"wall {floor['wall']['median']:.1f} µs")
+    for key, what in (("pipe_floor_us", "pipe ping-pong floor"), ("pipe_floor_one_cpu_us", "on one CPU")):
+        floor = result[key]
+        print(f"{what}: {floor['overhead_cpu_both_sides']['median']:.1f} µs CPU per round trip "
+              f"(parent {floor['grader_cpu']['median']:.1f}, echo {floor['worker_cpu']['median']:.1f}), "
+              f"wall {floor['wall']['median']:.1f} µs")
     print("grader side per lent round trip:", result["end_to_end_us"]["grader_side_counts_per_lent_round_trip"])
     for name, us in result["pieces_us_cpu"].items():
         print(f"  {name}: {us:.2f} µs")

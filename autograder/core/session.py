@@ -15,6 +15,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
+from autograder.core.pairing import IDLE_SECONDS, CpuPair
 from autograder.core.results import SYNTAX_ERRORS, GraderError, Reason
 from autograder.core.trusted_work import TrustedWorkTimeout
 from autograder.sandbox.config import Limits, SpawnConfig
@@ -353,6 +354,7 @@ class Session(Transport):
             for name in missing}
         self.status.update({name: CellStatus(False, why, Reason.UNREADABLE) for name, why in (unrunnable or {}).items()})
         self.worker: WorkerProcess | None = None
+        self.pair = CpuPair(None)  # the worker's and this thread's CPU while callbacks come quickly
         self.generation = 0
         self.time_used = 0.0
         self.isolation = "unknown"
@@ -390,6 +392,7 @@ class Session(Transport):
                 self.worker.kill()
             raise GraderError(f"the sandbox could not start: {err}") from None
         self.isolation = self.worker.isolation
+        self.pair = CpuPair(self.worker.pid)
 
     def _exec(self, cell: Cell) -> CellStatus:
         try:
@@ -423,6 +426,7 @@ class Session(Transport):
                 self.status[cell.label] = self._exec(cell)
 
     def close(self) -> None:
+        self.pair.release()
         if self.worker is not None:
             self.worker.kill()
             if self.worker.final_schedstat is not None:
@@ -511,12 +515,15 @@ class Session(Transport):
             self.worker.send(header, blobs, deadline)
             reply, reply_blobs = self.worker.receive(deadline)
             while "callback" in reply:  # the student's code called back into the grader: answer, read on
+                self.pair.callback()
                 answer, answer_blobs = self._answer(reply, reply_blobs)
                 del reply_blobs
                 if deadline.left() <= 0:
                     raise ChannelTimeout(why)
                 self.messages += 2
                 self.worker.send(answer, answer_blobs, deadline)
+                if self.pair.pinned and not self.worker.reader.ready(IDLE_SECONDS):
+                    self.pair.release()  # the worker is computing: it no longer needs to share a CPU
                 reply, reply_blobs = self.worker.receive(deadline)
             return _decode_reply(self, reply, reply_blobs)
         except ChannelTimeout:
@@ -538,6 +545,7 @@ class Session(Transport):
             self.worker.kill()
             raise SandboxFailure(f"sent malformed data back to the grader ({err})") from None
         finally:
+            self.pair.release()
             credit = deadline.credit()
             self.time_used += max(0.0, time.monotonic() - start - credit)
             self.credit_used += credit

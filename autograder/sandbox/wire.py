@@ -99,7 +99,11 @@ NPNUM_TYPES = {np.dtype(name).type: name for name in ("bool", "int8", "int16", "
 of their values is exactly a JSON bool, integer or double (a float32's value is one double exactly). Others
 (complex, ``longdouble``) cross as 0-d ``.npy`` blobs."""
 NPNUM_BY_NAME = {name: type_ for type_, name in NPNUM_TYPES.items()}
+_NPNUM_KIND = {name: np.dtype(name).kind for name in NPNUM_BY_NAME}
 NON_FINITE = ("nan", "inf", "-inf")
+_JSON_SCALARS = frozenset((type(None), bool, int, float, str))
+"""What JSON parsing gives and :func:`decode` returns unchanged."""
+_INT64 = 2**63
 
 
 def _npy_bytes(array: np.ndarray) -> bytes:
@@ -169,7 +173,7 @@ def _npnum(name: Any, value: Any) -> np.generic:
     type_ = NPNUM_BY_NAME.get(name) if type(name) is str else None
     if type_ is None:
         raise ProtocolError(f"unexpected value in message: a numpy scalar of type {str(name)[:QUOTED_CHARS]}")
-    kind = np.dtype(type_).kind
+    kind = _NPNUM_KIND[name]
     if not ((kind == "b" and type(value) is bool) or (kind in "iu" and type(value) is int)
             or (kind == "f" and (type(value) is float or value in NON_FINITE))):
         raise ProtocolError(f"unexpected value in message: {str(value)[:QUOTED_CHARS]} as a numpy {name}")
@@ -192,10 +196,10 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
             return v if abs(v) < 2**63 else {"$bigint": str(v)}
         if type(v) is float:
             return v if math.isfinite(v) else {"$float": repr(v)}
-        if type(v) is list:
-            return [enc(x, d + 1) for x in v]
-        if type(v) is tuple:
-            return {"$tuple": [enc(x, d + 1) for x in v]}
+        if type(v) is list or type(v) is tuple:  # strings and 64-bit ints inline: most lists hold only those
+            items = ([x if type(x) is str or (type(x) is int and -_INT64 < x < _INT64) else enc(x, d + 1) for x in v]
+                     if d < MAX_DEPTH else [enc(x, d + 1) for x in v])
+            return items if type(v) is list else {"$tuple": items}
         if type(v) is dict and (not v or all(type(k) is str for k in v)):
             return {"$dict": {k: enc(x, d + 1) for k, x in v.items()}}
         if type(v) is np.ndarray and v.dtype.kind in ALLOWED_DTYPE_KINDS:
@@ -250,7 +254,9 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
             raise ProtocolError("value nested too deeply")
         if t is None or type(t) in (bool, int, float, str):
             return t
-        if type(t) is list:
+        if type(t) is list:  # JSON's own scalars inline: most lists hold only those
+            if d < MAX_DEPTH + 2:
+                return [x if type(x) in _JSON_SCALARS else dec(x, d + 1) for x in t]
             return [dec(x, d + 1) for x in t]
         if type(t) is not dict or len(t) not in (1, 2):
             raise ProtocolError(f"unexpected value in message: {str(t)[:QUOTED_CHARS]}")
@@ -325,18 +331,22 @@ def _wait(fd: int, event: int, deadline: Any, poller: Any = None) -> None:
 
 def _write_all(fd: int, data: bytes, deadline: float | None) -> None:
     """Write all of ``data``; with a ``deadline``, on a non-blocking ``fd``, never block past it."""
-    view = memoryview(data)
+    try:
+        done = os.write(fd, data)
+    except BlockingIOError:
+        done = 0
+    if done == len(data):  # the usual case, a small message: one write, no deadline to look at
+        return
+    view = memoryview(data)[done:]
     while view:
+        if deadline is not None and seconds_left(deadline) < 0:
+            raise ChannelTimeout("the other side stopped reading")
         try:
             n = os.write(fd, view)
         except BlockingIOError:
             _wait(fd, select.POLLOUT, deadline)
             continue
-        if n == len(view):  # the usual case, a small message: one write, no deadline to look at
-            return
         view = view[n:]
-        if deadline is not None and seconds_left(deadline) < 0:
-            raise ChannelTimeout("the other side stopped reading")
 
 
 def _not_json(value: Any) -> Any:
@@ -360,8 +370,24 @@ def send_message(fd: int, header: dict[str, Any], blobs: list[bytes] = (), deadl
     writer for longer. The grader writes with one, on a non-blocking descriptor; a worker writes without.
     """
     head = _encode_header(dict(header, nblobs=len(blobs))).encode()
-    _write_all(fd, b"".join([struct.pack(">I", len(head)), head, *(struct.pack(">I", len(b)) + b for b in blobs)]),
-               deadline)
+    if not blobs:
+        _write_all(fd, _LENGTH.pack(len(head)) + head, deadline)
+        return
+    _write_all(fd, b"".join([_LENGTH.pack(len(head)), head, *(_LENGTH.pack(len(b)) + b for b in blobs)]), deadline)
+
+
+_LENGTH = struct.Struct(">I")
+"""A frame's length prefix."""
+_scan_json = json.JSONDecoder().raw_decode
+
+
+def _decode_header(text: str) -> Any:
+    """``json.loads`` for a header as :func:`send_message` writes it (no white space before or after the value),
+    without the per-call steps that allow for other texts."""
+    value, end = _scan_json(text)
+    if end != len(text):
+        raise json.JSONDecodeError("extra data", text, end)
+    return value
 
 
 READ_AHEAD = 64 * 1024
@@ -387,17 +413,24 @@ class FrameReader:
     def __init__(self, fd: int, max_message: int = MAX_MESSAGE_BYTES) -> None:
         self.fd, self.max_message = fd, max_message
         self._spare = bytearray(READ_AHEAD)
+        self._spare_view = memoryview(self._spare)
         self._pending = memoryview(b"")
+        """Bytes read but not yet taken: a view into the spare buffer, which a read refills only once they are
+        all taken (or copied out)."""
         self._poller = select.poll()
         self._poller.register(fd, select.POLLIN)
 
-    def _read_into(self, view: memoryview, deadline: Any) -> int:
-        """Read at least one byte into ``view`` (and what follows at once into the spare buffer): the count."""
+    def ready(self, seconds: float) -> bool:
+        """Whether a message has begun to arrive, waiting ``seconds`` at most (a millisecond's resolution)."""
+        return bool(self._pending) or bool(self._poller.poll(max(0, round(seconds * 1000))))
+
+    def _read_into(self, buffers: list, deadline: Any) -> int:
+        """Read at least one byte into ``buffers`` (filled in order): the count."""
         while True:
             if deadline is not None:
                 _wait(self.fd, select.POLLIN, deadline, self._poller)
             try:
-                k = os.readv(self.fd, [view, self._spare])
+                k = os.readv(self.fd, buffers)
             except BlockingIOError:
                 _wait(self.fd, select.POLLIN, deadline, self._poller)
                 continue
@@ -406,6 +439,7 @@ class FrameReader:
             return k
 
     def _read_exact(self, n: int, deadline: Any) -> bytearray:
+        """The next ``n`` bytes in a buffer of their own."""
         pending = self._pending
         if len(pending) >= n:  # read ahead already: the next frames of a small message
             self._pending = pending[n:]
@@ -413,22 +447,37 @@ class FrameReader:
         out = bytearray(n)
         view = memoryview(out)
         got = len(pending)
-        if got:
-            view[:got] = self._pending[:got]
-            self._pending = self._pending[got:]
+        view[:got] = pending
+        self._pending = memoryview(b"")
         while got < n:
-            k = self._read_into(view[got:], deadline)
+            k = self._read_into([view[got:], self._spare], deadline)
             if k > n - got:  # the read went on past this frame: keep the rest for the next ones
-                self._pending = memoryview(bytes(self._spare[:k - (n - got)]))
+                self._pending = self._spare_view[:k - (n - got)]
                 k = n - got
             got += k
         return out
 
     def _frame(self, deadline: Any, room: int, what: str) -> bytearray:
-        (size,) = struct.unpack(">I", self._read_exact(4, deadline))
+        (size,) = _LENGTH.unpack(self._read_exact(4, deadline))
         if size > room:
             raise ProtocolError(f"{what} of {size} bytes is over the limit")
         return self._read_exact(size, deadline)
+
+    def _header_text(self, deadline: Any, room: int) -> tuple[str, int]:
+        """The next frame, a message's JSON header, as text, and its size in bytes. A small message usually came
+        whole in one read: its header is then decoded straight from the read buffer."""
+        if not self._pending:
+            self._pending = self._spare_view[:self._read_into([self._spare], deadline)]
+        pending = self._pending
+        if len(pending) >= 4:
+            (size,) = _LENGTH.unpack_from(pending)
+            if size > room:
+                raise ProtocolError(f"a message header of {size} bytes is over the limit")
+            if len(pending) >= 4 + size:
+                self._pending = pending[4 + size:]
+                return str(pending[4:4 + size], "utf-8"), size
+        raw = self._frame(deadline, room, "a message header")
+        return raw.decode(), len(raw)
 
     def read_message(self, timeout: float | None = None, deadline: Any = None
                      ) -> tuple[dict[str, Any], list[bytearray]]:
@@ -439,16 +488,19 @@ class FrameReader:
         """
         if deadline is None and timeout is not None:
             deadline = time.monotonic() + timeout
-        raw = self._frame(deadline, min(MAX_HEADER_BYTES, self.max_message), "a message header")
-        if raw.count(b",") + raw.count(b"[") + raw.count(b"{") > MAX_HEADER_VALUES:
+        try:
+            text, size = self._header_text(deadline, min(MAX_HEADER_BYTES, self.max_message))
+        except UnicodeDecodeError:
+            raise ProtocolError("message header is not JSON") from None
+        if text.count(",") + text.count("[") + text.count("{") > MAX_HEADER_VALUES:
             raise ProtocolError(f"a message header holds more than {MAX_HEADER_VALUES} values")
         try:
-            header = json.loads(raw.decode())
-        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+            header = _decode_header(text)
+        except (json.JSONDecodeError, RecursionError):
             raise ProtocolError("message header is not JSON") from None
         if type(header) is not dict or type(header.get("nblobs")) is not int or not 0 <= header["nblobs"] < MAX_BLOBS:
             raise ProtocolError("message header is malformed")
-        room = self.max_message - len(raw) - 4
+        room = self.max_message - size - 4
         blobs = []
         for _ in range(header["nblobs"]):
             blobs.append(self._frame(deadline, room - 4, "a message"))
