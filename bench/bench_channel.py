@@ -207,7 +207,7 @@ while True:
 def pipe_floor(n: int, repeats: int, one_cpu: bool = False) -> dict:
     """The floor under any protocol: a 32-byte ping-pong over two pipes with a bare Python echo process (one
     blocking read and one write a side, no encoding, no deadline), CPU per round trip on both sides; with
-    ``one_cpu``, this thread and the echo process pinned to the CPU this thread is on."""
+    ``one_cpu``, this thread and the echo process pinned to one CPU."""
     to_r, to_w = os.pipe()
     from_r, from_w = os.pipe()
     child = subprocess.Popen([sys.executable, "-c", ECHO, str(to_r), str(from_w)], pass_fds=(to_r, from_w))
@@ -215,11 +215,8 @@ def pipe_floor(n: int, repeats: int, one_cpu: bool = False) -> dict:
     samples = []
     mask = os.sched_getaffinity(0)
     if one_cpu:
-        from autograder.core.pairing import _getcpu
-
-        cpu = _getcpu() if _getcpu is not None else min(mask)
-        os.sched_setaffinity(child.pid, {cpu})
-        os.sched_setaffinity(0, {cpu})
+        os.sched_setaffinity(child.pid, {min(mask)})
+        os.sched_setaffinity(0, {min(mask)})
     try:
         message = b"x" * 32
         for _ in range(repeats + 1):

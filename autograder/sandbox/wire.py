@@ -196,6 +196,15 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
             return v if abs(v) < 2**63 else {"$bigint": str(v)}
         if type(v) is float:
             return v if math.isfinite(v) else {"$float": repr(v)}
+        name = NPNUM_TYPES.get(type(v))
+        if name is not None:  # a numpy scalar that JSON holds exactly (an ``np.argmax``, say)
+            kind = _NPNUM_KIND[name]
+            if kind == "b":
+                return {"$npnum": ["bool", bool(v)]}
+            if kind == "f":
+                x = float(v)
+                return {"$npnum": [name, x if math.isfinite(x) else repr(x)]}
+            return {"$npnum": [name, int(v)]}
         if type(v) is list or type(v) is tuple:  # strings and 64-bit ints inline: most lists hold only those
             items = ([x if type(x) is str or (type(x) is int and -_INT64 < x < _INT64) else enc(x, d + 1) for x in v]
                      if d < MAX_DEPTH else [enc(x, d + 1) for x in v])
@@ -205,13 +214,6 @@ def encode(value: Any, to_handle: Callable[[Any], HandleRef] | None = None, dept
         if type(v) is np.ndarray and v.dtype.kind in ALLOWED_DTYPE_KINDS:
             blobs.append(_npy_bytes(v))
             return {"$ndarray": len(blobs) - 1}
-        if type(v) in NPNUM_TYPES:
-            if type(v) is np.bool_:
-                return {"$npnum": ["bool", bool(v)]}
-            if v.dtype.kind == "f":
-                x = float(v)
-                return {"$npnum": [NPNUM_TYPES[type(v)], x if math.isfinite(x) else repr(x)]}
-            return {"$npnum": [NPNUM_TYPES[type(v)], int(v)]}
         if isinstance(v, np.generic) and type(v).__module__ == "numpy" and v.dtype.kind in ALLOWED_DTYPE_KINDS:
             blobs.append(_npy_bytes(np.asarray(v)))
             return {"$npscalar": len(blobs) - 1}
@@ -252,7 +254,7 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
     def dec(t: Any, d: int) -> Any:
         if d > MAX_DEPTH + 2:  # the wrappers of a value at MAX_DEPTH
             raise ProtocolError("value nested too deeply")
-        if t is None or type(t) in (bool, int, float, str):
+        if type(t) in _JSON_SCALARS:
             return t
         if type(t) is list:  # JSON's own scalars inline: most lists hold only those
             if d < MAX_DEPTH + 2:
@@ -260,7 +262,12 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
             return [dec(x, d + 1) for x in t]
         if type(t) is not dict or len(t) not in (1, 2):
             raise ProtocolError(f"unexpected value in message: {str(t)[:QUOTED_CHARS]}")
-        (tag, body), *rest = t.items()
+        if len(t) == 1:
+            ((tag, body),), rest = t.items(), ()
+        else:
+            (tag, body), *rest = t.items()
+        if tag == "$npnum" and not rest and type(body) is list and len(body) == 2:  # the commonest tags first
+            return _npnum(*body)
         if tag == "$tuple" and type(body) is list and not rest:
             return tuple(dec(x, d + 1) for x in body)
         if tag == "$dict" and type(body) is dict and not rest:
@@ -274,8 +281,6 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
                 raise ProtocolError("bad integer") from None
         if tag == "$ndarray" and not rest:
             return _npy_array(blob(body))
-        if tag == "$npnum" and not rest and type(body) is list and len(body) == 2:
-            return _npnum(*body)
         if tag == "$npscalar" and not rest:
             array = _npy_array(blob(body))
             if array.ndim != 0:
