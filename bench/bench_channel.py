@@ -374,8 +374,11 @@ def summarise(path: Path, only: list[str] | None = None) -> dict:
     floor = [runs[f"after-{p}"]["pipe_floor_us"]["overhead_cpu_both_sides"]["median"] for p in pairs
              if "pipe_floor_us" in runs[f"after-{p}"]]
     commits = {side: sorted({runs[f"{side}-{p}"]["meta"].get("commit") for p in pairs}) for side in ("before", "after")}
+    one_cpu = [runs[f"after-{p}"]["pipe_floor_one_cpu_us"]["overhead_cpu_both_sides"]["median"] for p in pairs
+               if "pipe_floor_one_cpu_us" in runs[f"after-{p}"]]
     return {"pairs": len(pairs), "commits": commits, "cases": out, "load_at_start": loads,
             "pipe_floor_us_median": round(statistics.median(floor), 2) if floor else None,
+            "pipe_floor_one_cpu_us_median": round(statistics.median(one_cpu), 2) if one_cpu else None,
             "target_us": TARGET_US,
             "lent_round_trip_within_target": {case: row["after_us"]["median"] <= TARGET_US for case, row in out.items()
                                               if case.startswith("lent_round_trip")}}

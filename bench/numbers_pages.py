@@ -435,6 +435,37 @@ def headline_test_fast(data: dict) -> Headline:
          "setup_and_other_seconds", "machine_busy_seconds", "machine_idle_seconds"}
 
 
+def headline_channel(data: dict) -> Headline:
+    summaries = data.get("paired_summaries")
+    if not isinstance(summaries, dict) or not summaries:
+        return [], set()
+    target = data.get("target_us")
+    blocks: list[str | tuple[str, str]] = []
+    for name, summary in summaries.items():
+        if not isinstance(summary, dict) or not isinstance(summary.get("cases"), dict):
+            continue
+        commits = summary.get("commits") or {}
+        body = [[f"`{cell(case)}`", fmt(get(row, "before_us", "median")), fmt(get(row, "before_us", "per_pair")),
+                 fmt(get(row, "after_us", "median")), fmt(get(row, "after_us", "per_pair")),
+                 fmt(row.get("ratio_after_to_before"))] for case, row in summary["cases"].items()]
+        loads = summary.get("load_at_start") or {}
+        one_cpu = summary.get("pipe_floor_one_cpu_us_median")
+        blocks += [f"## {cell(str(name))}",
+                   table(["case", "before (µs)", "each pair", "after (µs)", "each pair", "after ÷ before"], body,
+                         ["---", "---:", "---", "---:", "---", "---:"]),
+                   f"CPU microseconds a round trip, both sides together, the worker's own loop subtracted; median of "
+                   f"{fmt(summary.get('pairs'))} before/after pairs run alternately (before: "
+                   f"{', '.join(f'`{c}`' for c in commits.get('before', [])) or '–'}; after: "
+                   f"{', '.join(f'`{c}`' for c in commits.get('after', [])) or '–'}), 1-minute load at each run's start "
+                   f"{fmt(sorted(round(v, 1) for v in loads.values() if is_number(v)))}; a bare pipe ping-pong "
+                   f"costs {fmt(summary.get('pipe_floor_us_median'))} µs in the same runs"
+                   + (f" ({fmt(one_cpu)} µs with both on one CPU)" if is_number(one_cpu) else "") + ". Target: a lent round trip "
+                   f"within {fmt(target)} µs; met: " + ", ".join(
+                       f"`{cell(case)}` {'yes' if ok else 'no'}"
+                       for case, ok in (summary.get("lent_round_trip_within_target") or {}).items()) + "."]
+    return blocks, {"paired_summaries"}
+
+
 def headline_notebook_budgets(data: dict) -> Headline:
     books = data.get("notebooks")
     if not isinstance(books, dict):
@@ -459,6 +490,7 @@ Headline = tuple[list[str | tuple[str, str]], set[str]]
 paths of the keys they show, which the generic part then leaves out."""
 
 HEADLINES: dict[str, Callable[[dict], Headline]] = {
+    "channel": headline_channel,
     "class_throughput": headline_class_throughput,
     "grader_limits": headline_grader_limits,
     "hw1b_multimodal": headline_hw1b,
