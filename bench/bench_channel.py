@@ -46,6 +46,7 @@ import argparse
 import json
 import os
 import select
+import signal
 import statistics
 import struct
 import subprocess
@@ -142,6 +143,36 @@ def per_op(samples: list[dict], n: int, key: str) -> list[float]:
 
 def summary(values: list[float]) -> dict:
     return {"median": statistics.median(values), "min": min(values), "max": max(values), "per_repeat": values}
+
+
+def busy_lent(seconds: float) -> None:
+    """Another grader at work beside the measured one (``--alongside``): a session of its own whose worker calls a
+    lent object back as fast as it can for ``seconds``; prints ``ready`` once its worker has started."""
+    from autograder.core.session import Lend, Namespace
+
+    zygote, session = start_session()
+    student = Namespace(session, "student")
+    print("ready", flush=True)
+    end = time.monotonic() + seconds
+    try:
+        while time.monotonic() < end:
+            student.duels(Lend(Env(), ("duel",), ("n_arms",)), 2000, False, timeout=600)
+    except KeyboardInterrupt:  # the measured grader is done
+        pass
+    finally:
+        session.close()
+        zygote.close()
+
+
+def start_alongside(k: int, seconds: float) -> list[subprocess.Popen]:
+    """``k`` other graders making lent round trips (:func:`busy_lent`) while this one is measured, started and
+    ready before it returns."""
+    others = [subprocess.Popen([sys.executable, __file__, "--busy-lent", str(seconds)], stdout=subprocess.PIPE, text=True)
+              for _ in range(k)]
+    for other in others:
+        if other.stdout.readline().strip() != "ready":
+            raise RuntimeError("a grader alongside did not start")
+    return others
 
 
 def end_to_end(n: int, repeats: int) -> dict:
@@ -394,6 +425,10 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=N)
     parser.add_argument("--repeats", type=int, default=REPEATS)
     parser.add_argument("--record", action="store_true")
+    parser.add_argument("--alongside", type=int, default=0, metavar="K",
+                        help="measure while K other graders (each a grader and its worker) make lent round trips, as "
+                             "a batch's other jobs would")
+    parser.add_argument("--busy-lent", type=float, help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, default=REPO / "bench" / "results" / "channel.json",
                         help="the results file --record merges into")
     args = parser.parse_args()
@@ -404,15 +439,28 @@ def main() -> None:
         args.out.write_text(json.dumps(data, indent=1) + "\n")
         print(json.dumps(summary_, indent=1))
         return
+    if args.busy_lent is not None:
+        busy_lent(args.busy_lent)
+        return
     if not args.label:
         parser.error("--label is needed to run")
     run_meta = meta()
-    result = {"meta": run_meta, "settings": {"n": args.n, "repeats": args.repeats,
-                                              "piece_iterations": PIECE_ITERATIONS},
-              "pipe_floor_us": pipe_floor(args.n, args.repeats),
-              "pipe_floor_one_cpu_us": pipe_floor(args.n, args.repeats, one_cpu=True),
-              "end_to_end_us": end_to_end(args.n, args.repeats),
-              "pieces_us_cpu": pieces(PIECE_ITERATIONS)}
+    others = start_alongside(args.alongside, 600.0) if args.alongside else []
+    try:
+        result = {"meta": run_meta, "settings": {"n": args.n, "repeats": args.repeats,
+                                                  "piece_iterations": PIECE_ITERATIONS, "alongside": args.alongside},
+                  "pipe_floor_us": pipe_floor(args.n, args.repeats),
+                  "pipe_floor_one_cpu_us": pipe_floor(args.n, args.repeats, one_cpu=True),
+                  "end_to_end_us": end_to_end(args.n, args.repeats),
+                  "pieces_us_cpu": pieces(PIECE_ITERATIONS)}
+    finally:
+        for other in others:  # an interrupt lets each close its session and zygote
+            other.send_signal(signal.SIGINT)
+        for other in others:
+            try:
+                other.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                other.kill()
     result["meta"]["load_at_end"] = list(os.getloadavg())
     for name, row in result["end_to_end_us"].items():
         if "overhead_cpu_both_sides" in row:
