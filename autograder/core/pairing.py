@@ -11,8 +11,8 @@ scheduler chooses again, and two graders that pinned to one CPU part). Only the 
 a thread the student starts while it is inherits the CPU.
 
 Pinning only narrows where the two may run, so it loosens no limit: a worker waiting for a busy CPU is forgiven
-that time as always (``FairDeadline``), up to the same cap. Where the kernel refuses (no permission, a CPU set
-that excludes the CPU), nothing is pinned.
+that time as always (``FairDeadline``), up to the same cap. Where the kernel refuses (a grader whose root lacks
+``CAP_SYS_NICE`` pinning a worker of another uid, a CPU set that excludes the CPU), nothing is pinned.
 """
 from __future__ import annotations
 

@@ -1,11 +1,16 @@
 """A worker and the grader share one CPU while a lent object's round trips come quickly, and only then."""
 from __future__ import annotations
 
+import json
 import os
+import shutil
+import subprocess
+import sys
 
 import pytest
 
 from autograder.core import pairing
+from conftest import REPO
 
 pytestmark = pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="pinning to one CPU of one changes nothing")
 
@@ -42,6 +47,14 @@ def session():
     session = Session(zygote, [Cell("probe", CELL, stub="looks")], SpawnConfig(course.sandbox_view(()), Limits()))
     session.start()
     assert session.status["probe"].ok, session.status["probe"].message
+    try:
+        worker = session.worker.pid
+        os.sched_setaffinity(worker, os.sched_getaffinity(worker))  # allowed only where pinning it is
+    except PermissionError:
+        session.close()
+        zygote.close()
+        pytest.skip("this grader may not set its worker's CPUs (no CAP_SYS_NICE, and the worker is another uid): "
+                    "nothing is pinned, test_without_the_right_to_pin_nothing_is_pinned_and_grading_goes_on checks that")
     yield session
     session.close()
     zygote.close()
@@ -93,3 +106,38 @@ def test_a_pair_whose_worker_is_gone_lets_the_grader_go():
     pair.pid = 2**22 + 12345  # no such process: restoring its mask fails quietly
     pair.release()
     assert not pair.pinned and os.sched_getaffinity(0) == everywhere
+
+
+WITHOUT_RIGHT = """
+import json, os
+from autograder.core import course
+from autograder.core.session import Cell, Lend, Namespace, Session
+from autograder.core.supervisor import Zygote
+from autograder.sandbox.config import Limits, SpawnConfig
+
+class Probe:
+    def look(self):
+        return sorted(os.sched_getaffinity(0))
+
+zygote = Zygote(["numpy"])
+session = Session(zygote, [Cell("probe", CELL, stub="looks")], SpawnConfig(course.sandbox_view(()), Limits()))
+session.start()
+seen = Namespace(session, "student").looks(Lend(Probe(), ("look",), ()), 64)
+print(json.dumps({"seen": seen, "pinnings": session.pair.pinnings, "isolation": session.isolation}))
+session.close()
+zygote.close()
+"""
+
+
+def test_without_the_right_to_pin_nothing_is_pinned_and_grading_goes_on():
+    """A grader whose root lacks CAP_SYS_NICE (a container's default set) may not set the CPUs of a worker that
+    runs as another uid: the round trips still run, on any CPU."""
+    if os.geteuid() != 0 or not shutil.which("setpriv"):
+        pytest.skip("needs root and setpriv to drop one capability")
+    done = subprocess.run(["setpriv", "--bounding-set=-sys_nice", "--inh-caps=-sys_nice", "--", sys.executable, "-c",
+                           f"CELL = {CELL!r}\n" + WITHOUT_RIGHT], cwd=REPO, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout.splitlines()[-1])
+    everywhere = sorted(os.sched_getaffinity(0))
+    assert out["pinnings"] == 0 and out["seen"] == [everywhere] * 64, out
