@@ -1,0 +1,111 @@
+"""Answers that know nothing of any stub, for every stub of every assignment at once: what they earn.
+
+    python bench/bench_generic_answers.py [--ids hw0_setup ...] [--record]
+
+Each suite ships one trivial answer per stub (``trivial_answers.py``, graded by
+``tests/core/test_adversarial_suites.py``). This is the wider, generic family a student tries before reading a
+docstring: every stub of a student notebook replaced by a function (or, for a class stub, a class whose every
+method) that returns the same thing whatever it is given: the first argument back, zeros or ones shaped like it,
+0, 0.5, its mean, None, an empty list or dict, a torch zero with a gradient. Each (assignment, answer) notebook
+is graded in one batch over all the assignments (``python -m autograder batch ID,ID,...``), and the record is the
+points each earned and which stub and test gave them. Every one should earn nothing; the script exits 1 if any
+did. ``--record`` writes ``bench/results/generic_answers.json``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
+
+RESULTS = REPO / "bench" / "results" / "generic_answers.json"
+ANSWERS = {
+    "first argument": "args[0] if args else None",
+    "zeros like it": "np.zeros_like(np.asarray(args[0], dtype=float)) if args else 0.0",
+    "ones like it": "np.ones_like(np.asarray(args[0], dtype=float)) if args else 1.0",
+    "0": "0.0",
+    "0.5": "0.5",
+    "its mean": "float(np.mean(np.asarray(args[0], dtype=float))) if args else 0.0",
+    "None": "None",
+    "[]": "[]",
+    "{}": "{}",
+    "torch zero with a gradient": "__import__('torch').zeros((), requires_grad=True)",
+}
+"""Settings fixed before any run: each generic answer, as the expression every stub returns."""
+
+
+def stub_source(name: str, value: str) -> str:
+    """A stub cell that returns ``value`` whatever it is given (a class stub: from every method)."""
+    if name[:1].isupper():
+        return (f"import numpy as np\nclass {name}:\n    def __init__(self, *args, **kwargs):\n        pass\n"
+                f"    def __getattr__(self, attr):\n        def any_method(*args, **kwargs):\n            return {value}\n"
+                f"        return any_method\n    def __call__(self, *args, **kwargs):\n        return {value}\n")
+    return f"import numpy as np\ndef {name}(*args, **kwargs):\n    return {value}\n"
+
+
+def slug(answer: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in answer).strip("_") or "answer"
+
+
+def main() -> int:
+    import nbformat
+
+    from autograder.authoring.samples import _with_stubs
+    from autograder.core import course
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--ids", nargs="*", help="assignments (default: every one with a hidden suite)")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--record", action="store_true")
+    args = parser.parse_args()
+    ids = args.ids or [a for a in course.assignment_ids() if course.suite_dir(a).is_dir()]
+    run_meta = meta(["autograder", "solutions", "assignments"])
+    with tempfile.TemporaryDirectory() as tmp:
+        folder, out = Path(tmp) / "submitted", Path(tmp) / "graded"
+        for assignment in ids:
+            (folder / assignment).mkdir(parents=True)
+            for answer, value in ANSWERS.items():
+                notebook = _with_stubs(assignment, {n: stub_source(n, value) for n in course.stub_names(assignment)})
+                nbformat.write(notebook, str(folder / assignment / f"{slug(answer)}.ipynb"))
+        start = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "autograder", "batch", ",".join(ids), str(folder), "--out",
+                               str(out), "--jobs", str(args.jobs)], cwd=REPO, capture_output=True, text=True)
+        seconds = time.monotonic() - start
+        if done.returncode != 0:
+            print(done.stdout[-2000:], done.stderr[-2000:], sep="\n")
+            return 2
+        rows, earners = [], 0
+        for assignment in ids:
+            for answer in ANSWERS:
+                result = json.loads((out / assignment / slug(answer) / "result.json").read_text())
+                earned = {s["name"]: [t["name"] for t in s["tests"] if t["passed"]]
+                          for s in result["stubs"] if s.get("score", 0) > 0}
+                rows.append({"assignment": assignment, "answer": answer, "graded": result.get("error") is None,
+                             "score": result.get("score"), "max_score": result.get("max_score"), "earned": earned})
+                earners += bool(earned) or result.get("error") is not None
+    for row in rows:
+        if row["earned"] or not row["graded"]:
+            print(f"{row['assignment']} / {row['answer']}: {row['score']} of {row['max_score']}: {row['earned']}")
+    print(f"{len(rows)} notebooks ({len(ids)} assignments x {len(ANSWERS)} answers) graded in {seconds:.0f} s; "
+          f"{earners} earned a point or were not graded")
+    if args.record:
+        run_meta["load_at_end"] = [round(x, 2) for x in __import__("os").getloadavg()]
+        RESULTS.write_text(json.dumps({
+            "description": "Generic answers (the same value whatever the input) in every stub of each assignment: "
+                           "the points each earned, and from which stub and test. Every one should earn nothing.",
+            "command": "python bench/bench_generic_answers.py --record", "answers": ANSWERS,
+            "notebooks": len(rows), "earned_or_not_graded": earners, "seconds": round(seconds, 1),
+            "rows": rows, "meta": run_meta}, indent=1) + "\n")
+        print(f"wrote {RESULTS}")
+    return 1 if earners else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
