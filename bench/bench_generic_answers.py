@@ -68,14 +68,15 @@ def main() -> int:
     ids = args.ids or [a for a in course.assignment_ids() if course.suite_dir(a).is_dir()]
     run_meta = meta(["autograder", "solutions", "assignments"])
     with tempfile.TemporaryDirectory() as tmp:
-        folder, out = Path(tmp) / "submitted", Path(tmp) / "graded"
+        folder, out = Path(tmp) / "handed_in", Path(tmp) / "graded"  # not "submitted": that name means nbgrader's layout
         for assignment in ids:
             (folder / assignment).mkdir(parents=True)
             for answer, value in ANSWERS.items():
                 notebook = _with_stubs(assignment, {n: stub_source(n, value) for n in course.stub_names(assignment)})
                 nbformat.write(notebook, str(folder / assignment / f"{slug(answer)}.ipynb"))
         start = time.monotonic()
-        done = subprocess.run([sys.executable, "-m", "autograder", "batch", ",".join(ids), str(folder), "--out",
+        submitted = folder if len(ids) > 1 else folder / ids[0]  # several: ID/ each; one: its notebooks
+        done = subprocess.run([sys.executable, "-m", "autograder", "batch", ",".join(ids), str(submitted), "--out",
                                str(out), "--jobs", str(args.jobs)], cwd=REPO, capture_output=True, text=True)
         seconds = time.monotonic() - start
         if done.returncode != 0:
@@ -83,8 +84,9 @@ def main() -> int:
             return 2
         rows, earners = [], 0
         for assignment in ids:
+            graded = out / assignment if len(ids) > 1 else out
             for answer in ANSWERS:
-                result = json.loads((out / assignment / slug(answer) / "result.json").read_text())
+                result = json.loads((graded / slug(answer) / "result.json").read_text())
                 earned = {s["name"]: [t["name"] for t in s["tests"] if t["passed"]]
                           for s in result["stubs"] if s.get("score", 0) > 0}
                 rows.append({"assignment": assignment, "answer": answer, "graded": result.get("error") is None,
