@@ -429,10 +429,13 @@ def run_batches(batches: list[Batch], *, write: Writer | None = None, jobs: int 
 
 
 def assignment_folder(folder: Path, assignment: str) -> Path:
-    """Where ``assignment``'s submissions lie in a batch over several: nbgrader's layout holds every
-    assignment (``submitted/<student>/<assignment>/``), so ``folder`` itself; else ``folder/<assignment>/``."""
+    """Where ``assignment``'s submissions lie in a batch over several: ``folder/<assignment>/`` when it holds
+    notebooks (whatever ``folder`` is called: nbgrader never puts a notebook straight in a student's folder);
+    else nbgrader's layout holds every assignment (``submitted/<student>/<assignment>/``), so ``folder`` itself."""
     folder = Path(folder)
     inner = submissions_folder(folder)
+    if (folder / assignment).is_dir() and any((folder / assignment).glob("*.ipynb")):
+        return folder / assignment  # notebooks in <assignment>/, even in a folder called submitted/
     if inner.name == "submitted" or (_nbgrader_layout(inner, assignment) and not (folder / assignment).is_dir()):
         return folder
     if (folder / assignment).is_dir():

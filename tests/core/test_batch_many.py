@@ -81,3 +81,14 @@ def test_cli_batch_all_over_nbgraders_layout(open_tmp):
     assert all(r["status"] == "graded" and r["score"] == r["max_score"] for rs in rows.values() for r in rs)
     assert "fx: 1 submissions" in done.stdout and "ex: 2 submissions" in done.stdout
     assert "hold no fx/" in done.stdout and "bob" in done.stdout, done.stdout
+
+
+def test_a_folder_called_submitted_holding_one_folder_per_assignment_is_read_as_that(fixture_env, tmp_path):
+    """``submitted/fx/*.ipynb`` is one folder per assignment, not nbgrader's ``submitted/<student>/<assignment>/``
+    with a student called fx (found by a script that named its folder so and graded nothing)."""
+    folder = tmp_path / "submitted"
+    (folder / "fx").mkdir(parents=True)
+    shutil.copy(SOLUTIONS / "fx" / "fx.ipynb", folder / "fx" / "alice.ipynb")
+    assert assignment_folder(folder, "fx") == folder / "fx"
+    nbgrader = _nbgrader(tmp_path / "course", {"alice": ["fx"]})
+    assert assignment_folder(nbgrader, "fx") == nbgrader, "nbgrader's own layout is still read as such"
