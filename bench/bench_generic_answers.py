@@ -68,7 +68,7 @@ def main() -> int:
     ids = args.ids or [a for a in course.assignment_ids() if course.suite_dir(a).is_dir()]
     run_meta = meta(["autograder", "solutions", "assignments"])
     with tempfile.TemporaryDirectory() as tmp:
-        folder, out = Path(tmp) / "handed_in", Path(tmp) / "graded"  # not "submitted": that name means nbgrader's layout
+        folder, out = Path(tmp) / "handed_in", Path(tmp) / "graded"
         for assignment in ids:
             (folder / assignment).mkdir(parents=True)
             for answer, value in ANSWERS.items():
