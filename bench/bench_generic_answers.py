@@ -6,7 +6,8 @@ Each suite ships one trivial answer per stub (``trivial_answers.py``, graded by
 ``tests/core/test_adversarial_suites.py``). This is the wider, generic family a student tries before reading a
 docstring: every stub of a student notebook replaced by a function (or, for a class stub, a class whose every
 method) that returns the same thing whatever it is given: the first argument back, zeros or ones shaped like it,
-0, 0.5, its mean, None, an empty list or dict, a torch zero with a gradient. Each (assignment, answer) notebook
+0, 0.5, its mean, None, an empty list or dict, a torch zero with a gradient, random numbers shaped like it, its
+sum over the last axis. Each (assignment, answer) notebook
 is graded in one batch over all the assignments (``python -m autograder batch ID,ID,...``), and the record is the
 points each earned and which stub and test gave them. Every one should earn nothing; the script exits 1 if any
 did. ``--record`` writes ``bench/results/generic_answers.json``.
@@ -37,8 +38,10 @@ ANSWERS = {
     "[]": "[]",
     "{}": "{}",
     "torch zero with a gradient": "__import__('torch').zeros((), requires_grad=True)",
+    "random like it": "np.random.default_rng().normal(size=np.shape(args[0])) if args else 0.0",
+    "its sum over the last axis": "np.asarray(args[0], dtype=float).sum(axis=-1) if args else 0.0",
 }
-"""Settings fixed before any run: each generic answer, as the expression every stub returns."""
+"""Each generic answer, as the expression every stub returns."""
 
 
 def stub_source(name: str, value: str) -> str:
