@@ -94,7 +94,7 @@ def _warn_isolation(level: str) -> None:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from autograder.core.batch import Shard, assignment_folder, assignments_in, missing_submissions
+    from autograder.core.batch import Shard, assignment_folder, assignments_in, missing_submissions, stray_files
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
     from autograder.outputs.files import grade_folder
     from autograder.outputs.text import plain
@@ -135,6 +135,11 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             listed = ", ".join(plain(m) for m in missing[:20]) + (f" and {len(missing) - 20} more" if len(missing) > 20 else "")
             print(f"{len(missing)} student folder(s) hold no {assignment}/ (not handed in; not graded, not in the "
                   f"gradebook): {listed}")
+        stray = [f for f in stray_files(folder) if shard.owns(f)]
+        if stray:
+            listed = ", ".join(plain(f) for f in stray[:20]) + (f" and {len(stray) - 20} more" if len(stray) > 20 else "")
+            print(f"{len(stray)} file(s) beside the submissions are not notebooks (.ipynb), so not graded and not in "
+                  f"the gradebook: {listed}")
     if shard.n > 1 and several:
         print(f"shard {shard.k} of {shard.n}: join each assignment's shards with python -m autograder merge")
     failed = [r for r in every if r.status == GRADER_ERROR]

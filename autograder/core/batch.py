@@ -193,6 +193,14 @@ def missing_submissions(folder: Path, assignment: str) -> list[str]:
     return [c.name for c in _student_folders(folder) if not os.path.lexists(c / assignment)]
 
 
+def stray_files(folder: Path) -> list[str]:
+    """The files handed in beside the submissions that are not notebooks (``alice.py``, ``bob.zip``): a submission
+    is a notebook or a folder, so these are not graded, recorded or counted, only named."""
+    folder = submissions_folder(folder)
+    return [c.name for c in sorted(folder.iterdir()) if not c.name.startswith(".") and c.suffix.lower() != ".ipynb"
+            and c.name != "submission_metadata.yml" and stat.S_ISREG(os.lstat(c).st_mode)]
+
+
 def _other_assignments_only(notebooks: list[Path], assignment: str) -> str:
     """A problem to report when every notebook submitted is named after another assignment, else ``""``."""
     others = set(course.assignment_ids()) - {assignment}
@@ -218,11 +226,12 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
         if child.name.startswith(".") or child.name in ("submission_metadata.yml",):
             continue
         mode = os.lstat(child).st_mode
+        notebook = child.suffix.lower() == ".ipynb"  # alice.IPYNB too
         if stat.S_ISLNK(mode):
-            if child.suffix == ".ipynb" or child.is_dir():
-                stem = child.stem if child.suffix == ".ipynb" else child.name
+            if notebook or child.is_dir():
+                stem = child.stem if notebook else child.name
                 entries.append(Entry(stem, None, problem=f"{child.name} is a symbolic link: the grader does not follow links"))
-        elif child.suffix == ".ipynb" and not stat.S_ISDIR(mode):
+        elif notebook and not stat.S_ISDIR(mode):
             if stat.S_ISREG(mode):
                 entries.append(Entry(child.stem, child))
             else:

@@ -128,7 +128,7 @@ def read_capped(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES) -> bytes:
 
 
 def walk_notebooks(folder: str | Path) -> tuple[list[Path], list[str]]:
-    """The ``.ipynb`` files under ``folder``, sorted, found without following links; and what was skipped.
+    """The ``.ipynb`` files (any case) under ``folder``, sorted, found without following links; and what was skipped.
 
     A link (to a notebook or a folder), or a notebook that is not a regular file, is left out and
     named in the second list, so the submission's feedback can say why it was not graded.
@@ -144,7 +144,7 @@ def walk_notebooks(folder: str | Path) -> tuple[list[Path], list[str]]:
             else:
                 kept.append(name)
         dirs[:] = kept
-        for name in sorted(f for f in files if f.endswith(".ipynb")):
+        for name in sorted(f for f in files if f.lower().endswith(".ipynb")):
             path = Path(root) / name
             try:
                 mode = os.lstat(path).st_mode

@@ -170,3 +170,26 @@ def test_one_zipped_folder_does_not_make_a_class_nbgrader_layout(tmp_path):
     (export / "s3" / "hw0_setup").mkdir()
     shutil.copy(SAMPLES / "complete.ipynb", export / "s3" / "hw0_setup" / "hw0_setup.ipynb")
     assert sorted(e.name for e in discover(export, "hw0_setup", EXPECTED)) == ["s1", "s2", "s3"]
+
+
+def test_a_notebook_in_capitals_is_graded_and_files_that_are_no_notebooks_are_named(open_tmp, tmp_path):
+    from autograder.core.batch import stray_files
+
+    flat = open_tmp / "flat"
+    flat.mkdir()
+    shutil.copy(SAMPLES / "complete.ipynb", flat / "alice.IPYNB")
+    shutil.copy(SAMPLES / "partial.ipynb", flat / "bob.ipynb")
+    (flat / "carol.py").write_text("def discounted_returns(r, g): ...\n")
+    (flat / ".DS_Store").write_bytes(b"\0")
+    (flat / "dan").mkdir()
+    shutil.copy(SAMPLES / "complete.ipynb", flat / "dan" / "HW0_SETUP.IPYNB")
+    assert stray_files(flat) == ["carol.py"]
+    assert {e.name: e.notebook.name for e in discover(flat, "hw0_setup", EXPECTED)} == \
+        {"alice": "alice.IPYNB", "bob": "bob.ipynb", "dan": "HW0_SETUP.IPYNB"}
+    out = open_tmp / "out"
+    done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(flat), "--out", str(out),
+                           "--jobs", "2"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "1 file(s) beside the submissions are not notebooks (.ipynb)" in done.stdout and "carol.py" in done.stdout
+    rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
+    assert sorted(rows) == ["alice", "bob", "dan"] and rows["alice"]["score"] == rows["alice"]["max_score"]
