@@ -42,6 +42,8 @@ def _cmd_grade(args: argparse.Namespace) -> int:
 
     course.check_assignment(args.assignment)
     require_one_checkout()
+    if not args.notebook.exists() and not args.notebook.is_symlink():  # a typo, not a submission to mark 0
+        raise SystemExit(f"{args.notebook}: no such notebook or folder")
     entry = None
     if args.notebook.is_dir() and not args.notebook.is_symlink():  # a submission folder: pick as batch would
         notebooks, skipped = notebooks_in(args.notebook)
@@ -237,6 +239,24 @@ def _cmd_mutants(args: argparse.Namespace) -> int:
     return command(args.assignment, args.stub or None, args.max_per_stub, args.seed, args.out)
 
 
+def _out_folder(text: str) -> Path:
+    """``--out``: a folder, made if missing; an existing file there is refused at once, not after the grading."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file; --out names the folder to write into")
+    return path
+
+
+def _jobs(text: str) -> int:
+    try:
+        jobs = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if jobs < 1:
+        raise argparse.ArgumentTypeError("--jobs is the number of grading processes: at least 1")
+    return jobs
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m autograder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -244,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("grade", help="grade one submission")
     p.add_argument("assignment")
     p.add_argument("notebook", type=Path)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=_out_folder, required=True)
     p.set_defaults(fn=_cmd_grade)
     p = sub.add_parser("batch", help="grade a folder of submissions (of one assignment, or several at once)")
     p.add_argument("assignment", metavar="ID[,ID...]",
@@ -252,15 +272,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("folder", type=Path, nargs="?", help="the submissions (for several: nbgrader's layout, or ID/ each)")
     p.add_argument("--all", action="store_true",
                    help="every assignment handed in under the folder (batch --all FOLDER --out DIR); each into DIR/ID/")
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", type=_out_folder, required=True)
+    p.add_argument("--jobs", type=_jobs, default=2)
     p.add_argument("--shard", default=None, metavar="K/N",
                    help="grade only shard K of N (split by submission name); join shards with `merge`")
     p.set_defaults(fn=_cmd_batch)
     p = sub.add_parser("merge", help="join the shards of a batch into one gradebook")
     p.add_argument("assignment")
     p.add_argument("shards", type=Path, nargs="+", help="the shards' --out folders (or one folder they share)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=_out_folder, required=True)
     p.set_defaults(fn=_cmd_merge)
     p = sub.add_parser("prairielearn", help="grade one submission as PrairieLearn's external grader")
     p.add_argument("assignment")
@@ -272,8 +292,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="the question's grading timeout (default: the submission's limit plus 60 s; at most 600)")
     p.set_defaults(fn=_cmd_prairielearn)
     p = sub.add_parser("demo", help="grade every assignment's sample submissions")
-    p.add_argument("--out", type=Path, default=Path("build/demo"))
-    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", type=_out_folder, default=Path("build/demo"))
+    p.add_argument("--jobs", type=_jobs, default=2)
     p.set_defaults(fn=_cmd_demo)
     from autograder.outputs import gradescope
 
