@@ -19,8 +19,15 @@ import argparse
 from pathlib import Path
 
 
+def _course_folder(text: str) -> Path:
+    if not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is not a folder (the nbgrader course: its nbgrader_config.py, "
+                                         "gradebook and autograded/)")
+    return Path(text)
+
+
 def _course(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--course", type=Path, default=None,
+    p.add_argument("--course", type=_course_folder, default=None,
                    help="the nbgrader course folder (default: this repository, whose nbgrader_config.py it reads)")
 
 
@@ -55,8 +62,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
     import sys
 
     from autograder.outputs.export import export
+    from autograder.outputs.gradebook import course_directory
     from autograder.outputs.text import plain
 
+    database = course_directory(args.course).db_url.removeprefix("sqlite:///")
+    if database.startswith("/") and not Path(database).exists():  # export would make an empty one there
+        raise SystemExit(f"no nbgrader gradebook at {database}, so nothing to export (is --course the course "
+                         "folder?); record a batch there first: python -m autograder nbgrader-sync ID FOLDER --results DIR")
     done = export(args.out, args.course, long=args.long, fmt=args.format, roster=args.roster,
                   extensions=args.extensions, lms_columns=args.lms_columns)
     grades = done.grades

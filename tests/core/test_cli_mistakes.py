@@ -32,3 +32,13 @@ def test_jobs_must_be_a_positive_whole_number(tmp_path, capsys, jobs, why):
         main(["batch", "hw0_setup", str(SAMPLE.parent), "--out", str(tmp_path / "out"), "--jobs", jobs])
     assert why in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_export_from_a_folder_that_is_not_a_course_says_so_and_writes_nothing(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["export", "--out", str(tmp_path / "grades.csv"), "--course", str(tmp_path / "nowhere")])
+    assert "is not a folder" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SystemExit, match="no nbgrader gradebook"):
+        main(["export", "--out", str(tmp_path / "grades.csv"), "--course", str(tmp_path / "empty")])
+    assert not (tmp_path / "grades.csv").exists() and not any((tmp_path / "empty").iterdir()), "and makes no gradebook"
