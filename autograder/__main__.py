@@ -175,6 +175,11 @@ def _cmd_prairielearn(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from autograder.authoring.nbrun import parse_value, run_notebook
 
+    if not Path(args.notebook).is_file():
+        raise SystemExit(f"{args.notebook}: no such notebook")
+    malformed = [item for item in args.parameter if "=" not in item]
+    if malformed:
+        raise SystemExit(f"-p takes NAME=VALUE (e.g. -p FAST=True), not {malformed[0]!r}")
     parameters = dict(item.split("=", 1) for item in args.parameter)
     report = run_notebook(args.notebook, {k: parse_value(v) for k, v in parameters.items()}, timeout=args.timeout,
                           until_first_stub=args.until_first_stub, output=args.output)
@@ -216,7 +221,9 @@ def _cmd_permissions(args: argparse.Namespace) -> int:
 
 def _cmd_samples(args: argparse.Namespace) -> int:
     from autograder.authoring.samples import write_samples
+    from autograder.core import course
 
+    course.check_assignment(args.assignment)
     for path in write_samples(args.assignment):
         print(path)
     return 0

@@ -42,3 +42,13 @@ def test_export_from_a_folder_that_is_not_a_course_says_so_and_writes_nothing(tm
     with pytest.raises(SystemExit, match="no nbgrader gradebook"):
         main(["export", "--out", str(tmp_path / "grades.csv"), "--course", str(tmp_path / "empty")])
     assert not (tmp_path / "grades.csv").exists() and not any((tmp_path / "empty").iterdir()), "and makes no gradebook"
+
+
+@pytest.mark.parametrize("command, why", [
+    (["run", "nowhere.ipynb"], "no such notebook"),
+    (["run", str(REPO / "solutions/hw0_setup/hw0_setup.ipynb"), "-p", "FAST"], "NAME=VALUE"),
+    (["samples", "hw9"], "unknown or ungradable assignment 'hw9'"),
+])
+def test_authoring_commands_name_the_mistake(command, why):
+    with pytest.raises(SystemExit, match=why):
+        main(command)
