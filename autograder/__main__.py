@@ -95,6 +95,13 @@ def _warn_isolation(level: str) -> None:
               file=sys.stderr)
 
 
+def _listed(names: list[str], shown: int = 20) -> str:
+    """Names for a line of the batch's report: the first ``shown``, made inert, and how many more."""
+    from autograder.outputs.text import plain
+
+    return ", ".join(plain(n) for n in names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
 def _cmd_batch(args: argparse.Namespace) -> int:
     from autograder.core.batch import Shard, assignment_folder, assignments_in, missing_submissions, stray_files
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
@@ -134,14 +141,12 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         folder = assignment_folder(args.folder, assignment) if several else args.folder
         missing = [m for m in missing_submissions(folder, assignment) if shard.owns(m)]
         if missing:
-            listed = ", ".join(plain(m) for m in missing[:20]) + (f" and {len(missing) - 20} more" if len(missing) > 20 else "")
             print(f"{len(missing)} student folder(s) hold no {assignment}/ (not handed in; not graded, not in the "
-                  f"gradebook): {listed}")
+                  f"gradebook): {_listed(missing)}")
         stray = [f for f in stray_files(folder) if shard.owns(f)]
         if stray:
-            listed = ", ".join(plain(f) for f in stray[:20]) + (f" and {len(stray) - 20} more" if len(stray) > 20 else "")
             print(f"{len(stray)} file(s) beside the submissions are not notebooks (.ipynb), so not graded and not in "
-                  f"the gradebook: {listed}")
+                  f"the gradebook: {_listed(stray)}")
     if shard.n > 1 and several:
         print(f"shard {shard.k} of {shard.n}: join each assignment's shards with python -m autograder merge")
     failed = [r for r in every if r.status == GRADER_ERROR]
