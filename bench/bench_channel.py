@@ -5,7 +5,8 @@
 
 hw3's RUCB tests lend an environment to the student's ``rucb`` (``autograder.suite.lend``): every
 ``env.duel(c, d)`` in the worker is a callback message to the grader, which runs the method and answers.
-A complete hw3 submission makes about 26,000 of them. This bench measures, in a real sandbox worker
+A complete hw3 submission makes about 5,000 of them (its five RUCB tests; ``messages`` in
+``bench/results/class_throughput.json``, two a round trip). This bench measures, in a real sandbox worker
 (spawned by the grader's own zygote, isolated as in grading):
 
 * **lent round trip**: student code in the worker calls ``env.duel(a, b)`` ``n`` times on a lent object

@@ -1,6 +1,6 @@
 """Keep a worker and the grader's thread on one CPU while they trade messages quickly. Runs in the grader.
 
-A lent object's round trips (hw3's duels: thousands in one call) are a ping-pong: at any moment one side
+A lent object's round trips (hw3's duels: about a thousand in one call) are a ping-pong: at any moment one side
 computes and the other waits. Left to the scheduler, each side sleeps on its own CPU and every message wakes
 an idle CPU on the other core; on a small VM that costs more than the protocol itself (measured by
 ``bench/bench_channel.py``: a bare pipe ping-pong costs 3-6 us of CPU a round trip on one CPU and 20-30 us
