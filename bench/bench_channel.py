@@ -403,14 +403,14 @@ def summarise(path: Path, only: list[str] | None = None) -> dict:
         row["ratio_after_to_before"] = round(row["after_us"]["median"] / row["before_us"]["median"], 3)
         out[case] = row
     loads = {f"{side}-{p}": round(runs[f"{side}-{p}"]["meta"]["load"][0], 2) for p in pairs for side in ("before", "after")}
-    floor = [runs[f"after-{p}"]["pipe_floor_us"]["overhead_cpu_both_sides"]["median"] for p in pairs
-             if "pipe_floor_us" in runs[f"after-{p}"]]
+    def floor_median(key: str) -> float | None:  # a floor over the "after" runs that recorded it
+        values = [runs[f"after-{p}"][key]["overhead_cpu_both_sides"]["median"] for p in pairs if key in runs[f"after-{p}"]]
+        return round(statistics.median(values), 2) if values else None
+
     commits = {side: sorted({runs[f"{side}-{p}"]["meta"].get("commit") for p in pairs}) for side in ("before", "after")}
-    one_cpu = [runs[f"after-{p}"]["pipe_floor_one_cpu_us"]["overhead_cpu_both_sides"]["median"] for p in pairs
-               if "pipe_floor_one_cpu_us" in runs[f"after-{p}"]]
     return {"pairs": len(pairs), "commits": commits, "cases": out, "load_at_start": loads,
-            "pipe_floor_us_median": round(statistics.median(floor), 2) if floor else None,
-            "pipe_floor_one_cpu_us_median": round(statistics.median(one_cpu), 2) if one_cpu else None,
+            "pipe_floor_us_median": floor_median("pipe_floor_us"),
+            "pipe_floor_one_cpu_us_median": floor_median("pipe_floor_one_cpu_us"),
             "target_us": TARGET_US,
             "lent_round_trip_within_target": {case: row["after_us"]["median"] <= TARGET_US for case, row in out.items()
                                               if case.startswith("lent_round_trip")}}
