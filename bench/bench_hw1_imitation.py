@@ -5,6 +5,7 @@ Prints the Markdown tables that the README shows:
     python bench/bench_hw1_imitation.py                  # everything (about 15 minutes on 2 shared cores)
     python bench/bench_hw1_imitation.py --calm           # the calm Hopper table only, recorded under "calm"
     python bench/bench_hw1_imitation.py --drift --part 0/2  # the drift protocol below (resumable; run parts 0/2 and 1/2 side by side)
+    python bench/bench_hw1_imitation.py --dart --part 0/2   # DART beside it, at the labels DAgger ended with (resumable)
     python bench/bench_hw1_imitation.py --expert HalfCheetah-v5=experts/HalfCheetah-v5/sac/ckpt_0125000.pt
 
 Every number comes from the reference solutions in ``solutions/hw1_imitation`` (run through the
@@ -40,6 +41,29 @@ push 0.1 with a linear and a 16×16 learner, timed the runs and showed BC stuck 
   expert's; spreads are standard deviations over the seeds.
 - Target (issue 34): in every setting, at the same labels, DAgger >= 0.9, BC <= 0.7, and the gap of
   the means more than twice the larger of the two spreads. Recorded as measured, met or not.
+
+DART, a third learner (``--dart``, recorded under ``"drift"`` -> ``"dart"``)
+-----------------------------------------------------------------------------
+Written here, and in the notebook, before any DART run beyond a 5-second smoke test of the code
+(200 gradient steps, 2 evaluation episodes). DART (Laskey et al., 2017) keeps the expert in control
+but adds Gaussian noise to the action it executes, as large as the errors the learner will make, and
+labels every state with the expert's clean action (``rlcourse.drift.dart_run``).
+
+- Same world, expert, demonstrations, settings (16×16, 32×32, 64×64), seeds (0-4), evaluation episodes
+  and fitting (5,000 steps, batch 256, lr 1e-3) as the drift protocol above, so DART's column sits beside
+  BC's and DAgger's from the results already recorded.
+- Labels: each (setting, seed) gets exactly as many labels as DAgger ended with in that run (the
+  recorded ``labels``), so all three learners are compared at the same expert labels.
+- Noise: the second moment of the action errors of the same-labels clone (BC on the first ``labels``
+  clean pairs, the very clone of the ``bc`` column, refitted with the same seed) on its own training
+  pairs: the error a learner of that width makes after that many clean labels, chosen from data a
+  practitioner has, not from returns. One noise estimate (DART's first iteration), no cap on its size.
+- Data: noisy-expert episodes seeded ``20_000 + 100 * seed``, cut at ``labels`` pairs. Learner: a fresh
+  network of the setting's width fitted to them, seeded as the clone.
+- Reported for every setting and seed: DART's fraction of the expert, the noise's standard deviations,
+  the disturbed expert's own return, and the refitted clone's fraction (a check that the refit
+  reproduces the recorded ``bc``). No bar is set for DART; whatever it shows is reported, and the
+  notebook and lecture 1 say what it means.
 """
 from __future__ import annotations
 
@@ -286,9 +310,90 @@ def drift_summary() -> dict:
             "target": "in every setting, at the same labels: DAgger >= 0.9, BC <= 0.7, gap > 2 x larger spread; 5 seeds"}
 
 
+DART_PARTIAL = REPO / "bench" / "results" / "hw1_imitation.dart.partial.json"
+
+
+def _recorded_drift() -> dict:
+    results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    if "drift" not in results:
+        sys.exit(f"--dart needs the drift protocol's results in {RESULTS.relative_to(REPO)}: run --drift first")
+    return results["drift"]
+
+
+def _dart_done() -> dict:
+    return json.loads(DART_PARTIAL.read_text()) if DART_PARTIAL.exists() else {"runs": []}
+
+
+def dart_runs(part: tuple[int, int]) -> None:
+    """Run this part's (setting, seed) DART runs at the labels DAgger ended with, skipping finished ones."""
+    recorded = _recorded_drift()
+    ns = build_reference("hw1_imitation")
+    expert = data.load_policy("experts/Hopper-v5/expert.pt")
+    env_id = drift.pushed_hopper(DRIFT_PUSH)
+    demos = Demonstrations.from_episodes(rollout(expert.act, env_id, DRIFT_DEMOS, seed=100))
+    expert_return = float(rollout(expert.act, env_id, DRIFT_EVAL, EVAL_SEED).returns.mean())
+    if not np.isclose(expert_return, recorded["expert_return"]["mean"], rtol=1e-4):
+        sys.exit(f"the expert's return here ({expert_return:.1f}) is not the recorded one "
+                 f"({recorded['expert_return']['mean']:.1f}): the drift results are from another world")
+    jobs = [(s["name"], seed, labels) for s in recorded["settings"] for seed, labels in zip(s["seeds"], s["labels"])]
+    index, n_parts = part
+    for j, (name, seed, labels) in enumerate(jobs):
+        if j % n_parts != index or any((r["name"], r["seed"]) == (name, seed) for r in _dart_done()["runs"]):
+            continue
+        print(f"{name}, seed {seed}, {labels} labels (run {j + 1} of {len(jobs)}):", flush=True)
+        t, cpu = time.time(), time.process_time()
+        run = drift.dart_run(ns["train_bc"], expert, env_id, demos, seed, expert_return, labels,
+                             hidden=DRIFT_SETTINGS[name], rescore_clone=True, log=lambda line: print(line, flush=True),
+                             **DRIFT_RUN)
+        run.update(name=name, wall_s=round(time.time() - t, 1), cpu_s=round(time.process_time() - cpu, 1))
+        state = _dart_done()  # re-read: the parts write in turn
+        state["runs"] = [r for r in state["runs"] if (r["name"], r["seed"]) != (name, seed)] + [run]
+        tmp = DART_PARTIAL.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(state, indent=1))
+        tmp.replace(DART_PARTIAL)
+
+
+def dart_summary(recorded: dict) -> dict:
+    """The "dart" object of the drift results from the partial file; prints the three learners' table."""
+    runs = _dart_done()["runs"]
+    settings = []
+    print("| learner | labels (mean) | BC, same labels | DART | DAgger | disturbed expert | noise sd (mean of 3) |")
+    print("|---|---|---|---|---|---|---|")
+    for s in recorded["settings"]:
+        mine = {r["seed"]: r for r in runs if r["name"] == s["name"]}
+        seeds = [seed for seed in s["seeds"] if seed in mine]
+        if not seeds:
+            continue
+        dart = np.array([mine[seed]["dart"] for seed in seeds])
+        again = [round(mine[seed]["bc_matched"], 4) for seed in seeds]
+        settings.append({"name": s["name"], "seeds": seeds, "labels": [mine[seed]["labels"] for seed in seeds],
+                         "dart": dart.round(4).tolist(), "dart_mean": float(dart.mean()), "dart_std": float(dart.std()),
+                         "bc_matched_again": again,
+                         "bc_reproduced": bool(np.allclose(again, [s["bc"][s["seeds"].index(x)] for x in seeds], atol=1e-3)),
+                         "noisy_expert": [round(mine[seed]["noisy_expert"], 4) for seed in seeds],
+                         "noise_std": [mine[seed]["noise_std"] for seed in seeds],
+                         "wall_s": [mine[seed]["wall_s"] for seed in seeds], "cpu_s": [mine[seed]["cpu_s"] for seed in seeds]})
+        last = settings[-1]
+        print(f"| {s['name']} | {np.mean(last['labels']):.0f} | {s['bc_mean']:.2f} ± {s['bc_std']:.2f} | "
+              f"{last['dart_mean']:.2f} ± {last['dart_std']:.2f} | {s['dagger_mean']:.2f} ± {s['dagger_std']:.2f} | "
+              f"{np.mean(last['noisy_expert']):.2f} | {np.mean(last['noise_std']):.2f} |")
+    return {"protocol": "bench/bench_hw1_imitation.py's docstring, 'DART, a third learner': the drift protocol's world, "
+                        "demonstrations, settings, seeds and labels; noise = second moment of the same-labels clone's "
+                        "action errors on its training pairs; noisy-expert episodes seeded 20000 + 100 * seed",
+            "settings": settings, "meta": meta()}
+
+
+def write_dart() -> None:
+    results = json.loads(RESULTS.read_text())
+    results["drift"]["dart"] = dart_summary(results["drift"])
+    RESULTS.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {RESULTS.relative_to(REPO)}")
+
+
 def write_drift() -> None:
     results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-    results["drift"] = drift_summary()
+    dart = results.get("drift", {}).get("dart")
+    results["drift"] = drift_summary() | ({"dart": dart} if dart else {})
     results["meta"] = meta()
     RESULTS.write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {RESULTS.relative_to(REPO)}")
@@ -312,9 +417,15 @@ def main() -> None:
     parser.add_argument("--calm", action="store_true", help="only the calm MuJoCo table, recorded under \"calm\"")
     parser.add_argument("--drift", action="store_true", help="run the drift protocol (resumable) and record it")
     parser.add_argument("--part", default="0/1", help="with --drift: run only part I of N of the runs (I/N)")
-    parser.add_argument("--summary", action="store_true", help="with --drift: only write the results of finished runs")
+    parser.add_argument("--summary", action="store_true", help="with --drift or --dart: only write the results of finished runs")
+    parser.add_argument("--dart", action="store_true", help="run DART at the drift protocol's labels (resumable) and record it")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.dart:
+        if not args.summary:
+            dart_runs(tuple(int(x) for x in args.part.split("/")))
+        write_dart()
+        return
     if args.drift:
         if not args.summary:
             drift_runs(tuple(int(x) for x in args.part.split("/")))

@@ -186,3 +186,112 @@ def plot_drift(runs: list[dict], ax, title: str = "") -> None:
     ax.legend(frameon=False, fontsize=8)
     if title:
         ax.set_title(title)
+
+
+# ---------------------------------------------------------------------------------------------------
+# DART (Laskey et al., 2017): an off-policy way to put recovery states into the demonstrations. The
+# expert still drives, but the action it executes carries Gaussian noise as large as the errors the
+# learner will make; every state it reaches is labelled with the expert's clean action. The learner
+# never acts while data are collected, as in behaviour cloning, yet its data hold the expert's
+# corrections from states near the tube, as DAgger's do.
+# ---------------------------------------------------------------------------------------------------
+
+def action_error_moment(policy, obs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """The ``(act_dim, act_dim)`` second moment ``E[(pi(s) - a)(pi(s) - a)^T]`` of ``policy.act``'s errors on
+    the pairs ``(obs, actions)``: the noise covariance DART injects, so that the expert's demonstrations
+    stray from its tube as far as a learner with these errors would."""
+    err = np.asarray(policy.act(obs), dtype=np.float64) - np.asarray(actions, dtype=np.float64)
+    return err.T @ err / len(err)
+
+
+class NoisyExpert:
+    """The expert's action plus noise drawn from ``N(0, cov)``, independently per step and per environment.
+
+    ``rng`` draws the noise, so a seeded generator gives reproducible episodes. Actions are clipped to
+    ``[low, high]`` (Hopper's torques lie in [-1, 1]), as the simulator would clip them anyway.
+    """
+
+    def __init__(self, expert, cov: np.ndarray, rng: np.random.Generator, low: float = -1.0, high: float = 1.0) -> None:
+        self.expert, self.cov, self.rng = expert, np.asarray(cov, dtype=np.float64), rng
+        self.low, self.high = low, high
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        clean = np.asarray(self.expert.act(obs), dtype=np.float64)
+        noise = self.rng.multivariate_normal(np.zeros(len(self.cov)), self.cov, size=len(clean))
+        return np.clip(clean + noise, self.low, self.high)
+
+
+def dart_demos(expert, env_id: str, cov: np.ndarray, n_labels: int, seed: int, batch: int = 4):
+    """Exactly ``n_labels`` DART pairs: episodes of :class:`NoisyExpert` (seeded ``seed, seed + 1, ...``, in
+    batches of ``batch`` run side by side) until ``n_labels`` states are visited, each state labelled
+    with the expert's *clean* action; the last episode is cut where the count is reached.
+
+    Returns a :class:`~rlcourse.imitation.Demonstrations` whose ``actions`` are the labels and whose
+    ``rewards`` and ``lengths`` are those of the noisy episodes (so ``.returns`` says how well the
+    expert did while disturbed; the cut episode counts its steps up to the cut).
+    """
+    from rlcourse.imitation import Demonstrations
+    from rlcourse.rollouts import rollout
+
+    if n_labels < 1:
+        raise ValueError(f"n_labels must be at least 1, got {n_labels}")
+    noisy = NoisyExpert(expert, cov, np.random.default_rng([seed, 4099]))
+    parts, total, next_seed = [], 0, seed
+    while total < n_labels:
+        part = Demonstrations.from_episodes(rollout(noisy, env_id, batch, seed=next_seed, progress=False))
+        parts.append(part)
+        total += len(part.obs)
+        next_seed += batch
+    obs = np.concatenate([p.obs for p in parts])[:n_labels]
+    rewards = np.concatenate([p.rewards for p in parts])[:n_labels]
+    lengths = np.concatenate([p.lengths for p in parts])
+    terminated = np.concatenate([p.terminated for p in parts])
+    ends = np.cumsum(lengths)
+    keep = int(np.searchsorted(ends, n_labels)) + 1           # episodes that hold the first n_labels states
+    lengths, terminated = lengths[:keep].copy(), terminated[:keep].copy()
+    cut = int(ends[keep - 1] - n_labels)
+    lengths[-1] -= cut
+    terminated[-1] &= cut == 0                                # a cut episode did not end by failure there
+    labels = np.asarray(expert.act(obs), dtype=np.float32)
+    return Demonstrations(obs, labels, rewards, lengths, terminated)
+
+
+def dart_run(train_bc, expert, env_id: str, demos, seed: int, expert_return: float, labels: int, *,
+             hidden=(16, 16), bc_steps: int = 5000, eval_episodes: int = 20, eval_seed: int = 1000,
+             batch_size: int = 256, lr: float = 1e-3, rescore_clone: bool = False, log=print, **_unused) -> dict:
+    """One training seed of DART at ``labels`` expert labels (DAgger's final count in :func:`drift_run`).
+
+    1. The noise: behaviour cloning on the first ``labels`` pairs of ``demos`` (exactly the clone that
+       :func:`drift_run` compares with DAgger, same seed), and the second moment of its action errors on
+       those pairs (:func:`action_error_moment`): the error a learner of this width makes after this many
+       clean labels, measured on data the practitioner has, never on returns.
+    2. ``labels`` pairs from the expert driving with that noise (:func:`dart_demos`, episodes seeded
+       ``20_000 + 100 * seed``), labelled with its clean actions.
+    3. A fresh learner fitted to them exactly as the clone was (``bc_steps`` steps, same seed), evaluated
+       on the same ``eval_episodes`` episodes as every learner of the protocol.
+
+    Returns ``{"seed", "labels", "noise_std"`` (square roots of the moment's diagonal), ``"noise_cov"``,
+    ``"noisy_expert"`` (the disturbed expert's mean return per whole episode, as a fraction of
+    ``expert_return``), ``"dart"`` (the learner's fraction), and, with ``rescore_clone``, ``"bc_matched"``
+    (the clone's own fraction, which must equal :func:`drift_run`'s on the same machine)``}``.
+    ``drift_run``'s other keyword arguments may be passed and are ignored.
+    """
+    import time
+
+    start = time.perf_counter()
+    score = lambda policy: expert_fraction(policy, expert_return, env_id, eval_episodes, eval_seed)  # noqa: E731
+    m = min(labels, len(demos.obs))
+    clone = fit_clone(train_bc, demos.obs[:m], demos.actions[:m], seed, bc_steps, hidden, batch_size, lr)
+    cov = action_error_moment(clone, demos.obs[:m], demos.actions[:m])
+    data = dart_demos(expert, env_id, cov, labels, seed=20_000 + 100 * seed)
+    learner = fit_clone(train_bc, data.obs, data.actions, seed, bc_steps, hidden, batch_size, lr)
+    returns = data.returns[:-1] if data.n_episodes > 1 else data.returns   # the last episode may be cut
+    out = {"seed": seed, "labels": int(labels), "noise_std": np.sqrt(np.diag(cov)).round(4).tolist(),
+           "noise_cov": cov.round(6).tolist(), "noisy_expert": float(returns.mean()) / expert_return,
+           "dart": score(learner)}
+    if rescore_clone:
+        out["bc_matched"] = score(clone)
+    log(f"  seed {seed}: DART on {labels} labels (noise sd {', '.join(f'{s:.2f}' for s in out['noise_std'])}; "
+        f"the disturbed expert {out['noisy_expert']:.2f}): {out['dart']:.2f} of the expert "
+        f"({time.perf_counter() - start:.0f} s)")
+    return out
