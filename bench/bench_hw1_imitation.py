@@ -61,9 +61,15 @@ labels every state with the expert's clean action (``rlcourse.drift.dart_run``).
 - Data: noisy-expert episodes seeded ``20_000 + 100 * seed``, cut at ``labels`` pairs. Learner: a fresh
   network of the setting's width fitted to them, seeded as the clone.
 - Reported for every setting and seed: DART's fraction of the expert, the noise's standard deviations,
-  the disturbed expert's own return, and the refitted clone's fraction (a check that the refit
-  reproduces the recorded ``bc``). No bar is set for DART; whatever it shows is reported, and the
-  notebook and lecture 1 say what it means.
+  the disturbed expert's own return, and the refitted clone's fraction. No bar is set for DART; whatever
+  it shows is reported, and the notebook and lecture 1 say what it means.
+- Fractions are of the recorded expert return (the denominator of the BC and DAgger columns). Added after
+  the first start, before any DART result: the re-measured expert return is 2,681.4, not the recorded
+  2,667.9. Rollouts now differ from the drift runs' in the last digits of floating point (other library
+  builds on this machine), and Hopper's chaotic contacts amplify that to whole episodes (one of the 20
+  went from 2,309 to 2,587). So the run stops if the two differ by more than 2%, and the refitted clone
+  is not a copy of the recorded one but a second draw of the same-labels clone, trained and evaluated
+  beside DART: compare DART with both.
 """
 from __future__ import annotations
 
@@ -331,10 +337,12 @@ def dart_runs(part: tuple[int, int]) -> None:
     expert = data.load_policy("experts/Hopper-v5/expert.pt")
     env_id = drift.pushed_hopper(DRIFT_PUSH)
     demos = Demonstrations.from_episodes(rollout(expert.act, env_id, DRIFT_DEMOS, seed=100))
-    expert_return = float(rollout(expert.act, env_id, DRIFT_EVAL, EVAL_SEED).returns.mean())
-    if not np.isclose(expert_return, recorded["expert_return"]["mean"], rtol=1e-4):
-        sys.exit(f"the expert's return here ({expert_return:.1f}) is not the recorded one "
-                 f"({recorded['expert_return']['mean']:.1f}): the drift results are from another world")
+    now = float(rollout(expert.act, env_id, DRIFT_EVAL, EVAL_SEED).returns.mean())
+    expert_return = recorded["expert_return"]["mean"]   # the denominator of the recorded BC and DAgger columns
+    if not np.isclose(now, expert_return, rtol=0.02):
+        sys.exit(f"the expert's return here ({now:.1f}) is not the recorded one ({expert_return:.1f}): "
+                 "the drift results are from another world")
+    print(f"the expert's return on the evaluation episodes: {now:.1f} here, {expert_return:.1f} recorded", flush=True)
     jobs = [(s["name"], seed, labels) for s in recorded["settings"] for seed, labels in zip(s["seeds"], s["labels"])]
     index, n_parts = part
     for j, (name, seed, labels) in enumerate(jobs):
@@ -345,7 +353,8 @@ def dart_runs(part: tuple[int, int]) -> None:
         run = drift.dart_run(ns["train_bc"], expert, env_id, demos, seed, expert_return, labels,
                              hidden=DRIFT_SETTINGS[name], rescore_clone=True, log=lambda line: print(line, flush=True),
                              **DRIFT_RUN)
-        run.update(name=name, wall_s=round(time.time() - t, 1), cpu_s=round(time.process_time() - cpu, 1))
+        run.update(name=name, expert_return_now=now, wall_s=round(time.time() - t, 1),
+                   cpu_s=round(time.process_time() - cpu, 1))
         state = _dart_done()  # re-read: the parts write in turn
         state["runs"] = [r for r in state["runs"] if (r["name"], r["seed"]) != (name, seed)] + [run]
         tmp = DART_PARTIAL.with_suffix(f".{os.getpid()}.tmp")
@@ -357,8 +366,8 @@ def dart_summary(recorded: dict) -> dict:
     """The "dart" object of the drift results from the partial file; prints the three learners' table."""
     runs = _dart_done()["runs"]
     settings = []
-    print("| learner | labels (mean) | BC, same labels | DART | DAgger | disturbed expert | noise sd (mean of 3) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| learner | labels (mean) | BC, same labels | BC refitted | DART | DAgger | disturbed expert | noise sd (mean of 3) |")
+    print("|---|---|---|---|---|---|---|---|")
     for s in recorded["settings"]:
         mine = {r["seed"]: r for r in runs if r["name"] == s["name"]}
         seeds = [seed for seed in s["seeds"] if seed in mine]
@@ -368,14 +377,14 @@ def dart_summary(recorded: dict) -> dict:
         again = [round(mine[seed]["bc_matched"], 4) for seed in seeds]
         settings.append({"name": s["name"], "seeds": seeds, "labels": [mine[seed]["labels"] for seed in seeds],
                          "dart": dart.round(4).tolist(), "dart_mean": float(dart.mean()), "dart_std": float(dart.std()),
-                         "bc_matched_again": again,
-                         "bc_reproduced": bool(np.allclose(again, [s["bc"][s["seeds"].index(x)] for x in seeds], atol=1e-3)),
+                         "bc_matched_again": again, "bc_again_mean": float(np.mean(again)),
+                         "bc_again_std": float(np.std(again)),
                          "noisy_expert": [round(mine[seed]["noisy_expert"], 4) for seed in seeds],
                          "noise_std": [mine[seed]["noise_std"] for seed in seeds],
                          "wall_s": [mine[seed]["wall_s"] for seed in seeds], "cpu_s": [mine[seed]["cpu_s"] for seed in seeds]})
         last = settings[-1]
         print(f"| {s['name']} | {np.mean(last['labels']):.0f} | {s['bc_mean']:.2f} ± {s['bc_std']:.2f} | "
-              f"{last['dart_mean']:.2f} ± {last['dart_std']:.2f} | {s['dagger_mean']:.2f} ± {s['dagger_std']:.2f} | "
+              f"{last['bc_again_mean']:.2f} ± {last['bc_again_std']:.2f} | {last['dart_mean']:.2f} ± {last['dart_std']:.2f} | {s['dagger_mean']:.2f} ± {s['dagger_std']:.2f} | "
               f"{np.mean(last['noisy_expert']):.2f} | {np.mean(last['noise_std']):.2f} |")
     return {"protocol": "bench/bench_hw1_imitation.py's docstring, 'DART, a third learner': the drift protocol's world, "
                         "demonstrations, settings, seeds and labels; noise = second moment of the same-labels clone's "
