@@ -392,9 +392,28 @@ def dart_summary(recorded: dict) -> dict:
             "settings": settings, "meta": meta()}
 
 
+def redraw_drift_figure(recorded: dict) -> None:
+    """``bench/results/hw1_imitation_drift.png`` from the recorded curves, DART's points added."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    dart = {s["name"]: s for s in recorded.get("dart", {}).get("settings", [])}
+    fig, axes = plt.subplots(1, len(recorded["settings"]), figsize=(5 * len(recorded["settings"]), 3.8), sharey=True)
+    for ax, s in zip(np.atleast_1d(axes), recorded["settings"]):
+        runs = [{"bc": b, "dagger": d, "labels": n, "bc_matched": x, "dagger_final": y}
+                for b, d, n, x, y in zip(s["bc_curve"], s["dagger_curve"], s["labels"], s["bc"], s["dagger"])]
+        points = [{"dart": f, "labels": n} for f, n in zip(dart[s["name"]]["dart"], dart[s["name"]]["labels"])] \
+            if s["name"] in dart else None
+        drift.plot_drift(runs, ax, f"{s['name']} learner, pushes of {recorded['protocol']['push']}", dart=points)
+    fig.tight_layout()
+    fig.savefig(RESULTS.with_name("hw1_imitation_drift.png"), dpi=100)
+
+
 def write_dart() -> None:
     results = json.loads(RESULTS.read_text())
     results["drift"]["dart"] = dart_summary(results["drift"])
+    redraw_drift_figure(results["drift"])
     RESULTS.write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {RESULTS.relative_to(REPO)}")
 

@@ -161,10 +161,10 @@ def summarise(runs: list[dict]) -> dict:
             "target_met": bool(dg.mean() >= 0.9 and bc.mean() <= 0.7 and dg.mean() - bc.mean() > 2 * spread)}
 
 
-def plot_drift(runs: list[dict], ax, title: str = "") -> None:
+def plot_drift(runs: list[dict], ax, title: str = "", dart: list[dict] | None = None) -> None:
     """Fraction of the expert against expert labels for one setting's runs: the behaviour-cloning
     curve (mean and one standard deviation over seeds), DAgger by iteration (labels averaged over
-    seeds) and the clone on DAgger's final number of labels."""
+    seeds), the clone on DAgger's final number of labels and, given :func:`dart_run` results, DART there."""
     bc = np.array([[f for _, f in r["bc"]] for r in runs])
     bc_x = np.mean([[n for n, _ in r["bc"]] for r in runs], axis=0)
     dg = np.array([[f for _, f in r["dagger"]] for r in runs])
@@ -177,6 +177,10 @@ def plot_drift(runs: list[dict], ax, title: str = "") -> None:
     s = summarise(runs)
     ax.errorbar([np.mean(s["labels"])], [s["bc_mean"]], yerr=[s["bc_std"]], color="tab:red", marker="s",
                 linestyle="none", capsize=3, label="BC on DAgger's final labels")
+    if dart:
+        scores = np.array([r["dart"] for r in dart])
+        ax.errorbar([np.mean([r["labels"] for r in dart])], [scores.mean()], yerr=[scores.std()], color="tab:green",
+                    marker="D", linestyle="none", capsize=3, label="DART on the same labels")
     ax.axhline(1.0, linestyle="--", color="grey", linewidth=1)
     ax.set_xscale("log")
     ax.set_xlabel("expert labels")

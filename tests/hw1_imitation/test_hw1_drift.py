@@ -123,3 +123,63 @@ def test_lecture_links_resolve_in_jupyterlab(notebook):
         target = (notebook.parent / path).resolve()
         assert target.is_file(), f"{path} does not exist"
         assert anchor in jupyterlab_heading_ids(target.read_text()), f"{path}#{anchor}: no heading with that JupyterLab id"
+
+
+class _Linear:
+    """A stand-in expert (or learner): ``act(obs) = obs[:, :3] @ W``, cheap and deterministic."""
+
+    def __init__(self, scale: float) -> None:
+        self.W = scale * np.eye(11, 3)
+
+    def act(self, obs):
+        return np.asarray(obs, dtype=np.float64) @ self.W
+
+
+def test_action_error_moment_by_hand():
+    obs = np.zeros((2, 11))
+    obs[0, 0], obs[1, 1] = 1.0, 2.0
+    actions = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    # errors with W = I: (1, 0, 0) and (0, 2 - 1, 0); second moment = diag(1, 1, 0) / 2
+    assert np.allclose(drift.action_error_moment(_Linear(1.0), obs, actions), np.diag([0.5, 0.5, 0.0]))
+
+
+def test_noisy_expert_adds_the_asked_covariance():
+    cov = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.0], [0.0, 0.0, 0.01]])
+    noisy = drift.NoisyExpert(_Linear(0.0), cov, np.random.default_rng(0))
+    draws = np.concatenate([noisy(np.zeros((1000, 11))) for _ in range(20)])
+    assert np.allclose(draws.mean(axis=0), 0.0, atol=0.01)
+    assert np.allclose(np.cov(draws.T), cov, atol=0.004), "the noise must have the covariance asked for"
+    assert np.abs(drift.NoisyExpert(_Linear(0.0), np.eye(3) * 100, np.random.default_rng(0))(np.zeros((50, 11)))).max() <= 1.0
+
+
+def test_dart_demos_count_labels_and_seeding():
+    expert, env_id = _Linear(-0.5), drift.pushed_hopper(0.1)
+    clean = drift.dart_demos(expert, env_id, np.zeros((3, 3)), 700, seed=3, batch=2)
+    assert len(clean.obs) == len(clean.actions) == int(clean.lengths.sum()) == 700, "exactly n_labels pairs"
+    assert np.allclose(clean.actions, expert.act(clean.obs), atol=1e-6), "labels are the expert's clean actions"
+    from rlcourse.imitation import Demonstrations
+    from rlcourse.rollouts import rollout
+    same = Demonstrations.from_episodes(rollout(expert.act, env_id, 2, seed=3, progress=False))
+    n = min(len(same.obs), 700)
+    assert np.allclose(clean.obs[:n], same.obs[:n]), "without noise, the expert's own seeded episodes"
+    noisy = drift.dart_demos(expert, env_id, np.eye(3) * 0.04, 700, seed=3, batch=2)
+    assert len(noisy.obs) == 700 and np.allclose(noisy.actions, expert.act(noisy.obs), atol=1e-6)
+    assert not np.allclose(noisy.obs[:50], clean.obs[:50]), "the noise moves the expert off its own states"
+    again = drift.dart_demos(expert, env_id, np.eye(3) * 0.04, 700, seed=3, batch=2)
+    assert np.array_equal(again.obs, noisy.obs), "the same seed gives the same noise"
+    with pytest.raises(ValueError):
+        drift.dart_demos(expert, env_id, np.zeros((3, 3)), 0, seed=3)
+
+
+def test_dart_results_agree_with_the_drift_results():
+    if not RESULTS.exists() or "dart" not in json.loads(RESULTS.read_text()).get("drift", {}):
+        pytest.skip("no DART results recorded yet")
+    recorded = json.loads(RESULTS.read_text())["drift"]
+    by_name = {s["name"]: s for s in recorded["settings"]}
+    assert {"commit", "date", "load"} <= set(recorded["dart"]["meta"])
+    for s in recorded["dart"]["settings"]:
+        drift_setting = by_name[s["name"]]
+        assert s["labels"] == [drift_setting["labels"][drift_setting["seeds"].index(x)] for x in s["seeds"]], \
+            "DART gets exactly DAgger's final labels, seed by seed"
+        assert np.isclose(np.mean(s["dart"]), s["dart_mean"], atol=1e-3) and np.isclose(np.std(s["dart"]), s["dart_std"], atol=1e-3)
+        assert len(s["noise_std"]) == len(s["noisy_expert"]) == len(s["bc_matched_again"]) == len(s["seeds"])
