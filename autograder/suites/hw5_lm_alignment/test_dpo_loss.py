@@ -43,7 +43,9 @@ def test_log2_at_reference(student, rng):
 
 @stub("dpo_loss", points=2, hint=HINT)
 def test_gradient_by_finite_difference(student, rng):
-    """Autograd gradients with respect to pi_chosen and pi_rejected match central finite differences"""
+    """Autograd gradients with respect to pi_chosen and pi_rejected match central finite differences of the DPO loss"""
+    # differences of the loss written out here, not of the submission's own value: a linear "loss" of the margin is
+    # consistent with its own gradient and has the right signs
     pc, pr, rc, rr = (x[:5] for x in _inputs(rng))
     beta, h = 0.5, 1e-4
     g_c, g_r = student.helpers.grad("dpo_loss", [pc, pr, rc, rr, beta], wrt=[0, 1])
@@ -52,9 +54,10 @@ def test_gradient_by_finite_difference(student, rng):
     for i in range(5):
         e = torch.zeros(5, dtype=pc.dtype)
         e[i] = h
-        fd_c[i] = (_value(student.dpo_loss(pc + e, pr, rc, rr, beta)) - _value(student.dpo_loss(pc - e, pr, rc, rr, beta))) / (2 * h)
-        fd_r[i] = (_value(student.dpo_loss(pc, pr + e, rc, rr, beta)) - _value(student.dpo_loss(pc, pr - e, rc, rr, beta))) / (2 * h)
-    check_tensor(g_c, torch.as_tensor(fd_c), rtol=1e-4, atol=1e-6, name="d loss / d pi_chosen")
+        fd_c[i] = (_by_hand(pc + e, pr, rc, rr, beta) - _by_hand(pc - e, pr, rc, rr, beta)) / (2 * h)
+        fd_r[i] = (_by_hand(pc, pr + e, rc, rr, beta) - _by_hand(pc, pr - e, rc, rr, beta)) / (2 * h)
+    check_tensor(g_c, torch.as_tensor(fd_c), rtol=1e-4, atol=1e-6,
+                 name="d loss / d pi_chosen (it should be -beta * sigmoid(-beta * margin) / N)")
     check_tensor(g_r, torch.as_tensor(fd_r), rtol=1e-4, atol=1e-6, name="d loss / d pi_rejected")
     assert (g_c.numpy() < 0).all() and (g_r.numpy() > 0).all(), \
         "the loss should fall as pi_chosen rises and rise with pi_rejected"
@@ -68,6 +71,8 @@ def test_direction_and_extremes(student):
     down = _value(student.dpo_loss(z, torch.tensor([1.0]), z, z, 1.0))
     assert up < np.log(2) < down, ("raising pi_chosen above the reference must lower the loss below log 2: the margin "
                                    "is (pi_chosen - ref_chosen) - (pi_rejected - ref_rejected), chosen minus rejected")
+    check_scalar(up, float(np.log1p(np.exp(-1.0))), rtol=1e-6,
+                 name="the loss at margin +1, beta = 1 (-log sigmoid(1), not a linear or hinge function of the margin)")
     extreme = _value(student.dpo_loss(torch.tensor([-1000.0]), z, z, z, 1.0))
     assert np.isfinite(extreme), "the loss at margin -1000 is not finite: use F.logsigmoid, not log(sigmoid(.))"
     check_scalar(extreme, 1000.0, rtol=1e-6, name="the loss at margin -1000")

@@ -26,15 +26,18 @@ def test_sign_and_mean(student):
     good = _value(student.reward_model_loss(torch.tensor([2.0]), torch.tensor([0.0])))
     bad = _value(student.reward_model_loss(torch.tensor([0.0]), torch.tensor([2.0])))
     assert good < bad, "ranking the chosen sequence higher should give the smaller loss"
+    check_scalar(good, float(np.log1p(np.exp(-2.0))), rtol=1e-6,
+                 name="the loss of one pair with chosen 2, rejected 0 (-log sigmoid(2), not a hinge or linear loss)")
     check_scalar(_value(student.reward_model_loss(torch.tensor([2.0, 2.0]), torch.tensor([0.0, 0.0]))), good,
                  name="the loss of the same pair twice")
 
 
 @stub("reward_model_loss", points=1, hint="Use F.logsigmoid: log(sigmoid(d)) is -inf for d below about -100.")
 def test_extreme_scores(student):
-    """Score gaps of +-1000 give finite losses (about 1000 and 0)"""
-    got = _value(student.reward_model_loss(torch.tensor([-500.0, 500.0]), torch.tensor([500.0, -500.0])))
-    check_scalar(got, 500.0, rtol=1e-6)
+    """Score gaps of +-1000 give finite losses (about 1000 and 0), beside a tied pair (log 2)"""
+    got = _value(student.reward_model_loss(torch.tensor([-500.0, 500.0, 3.0]), torch.tensor([500.0, -500.0, 3.0])))
+    check_scalar(got, (1000.0 + np.log(2.0)) / 3, rtol=1e-6,
+                 name="the mean loss of pairs with gaps -1000, +1000 and 0 (the tied pair costs log 2)")
 
 
 @stub("reward_model_loss", points=1, hint=HINT)

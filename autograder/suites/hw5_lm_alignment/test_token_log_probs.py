@@ -28,10 +28,14 @@ def _as_np(x, name="the result"):
 
 @stub("token_log_probs", points=2, hint=HINT)
 def test_matches_direct_gather(student, rng, ragged_batch):
-    """Random logits and ragged masks: every entry equals the log-softmax picked out directly"""
+    """Random logits and ragged masks (one with mask[:, 0] = 1, treated as 0): each entry is the log-softmax picked out directly"""
     logits, tokens, mask = ragged_batch(rng)
-    got = student.token_log_probs(logits, tokens, mask)
-    check_array(_as_np(got), direct_token_log_probs(logits, tokens, mask), rtol=1e-5, atol=1e-6)
+    mask[1, 0] = 1.0                                       # column 0 predicts nothing, whatever the mask says
+    got = _as_np(student.token_log_probs(logits, tokens, mask))
+    want = direct_token_log_probs(logits, tokens, mask)
+    assert got.shape == want.shape and got[1, 0] == 0, \
+        "out[:, 0] must be exactly 0 even where mask[:, 0] is 1: no logits predict the first token (rolled logits?)"
+    check_array(got, want, rtol=1e-5, atol=1e-6)
 
 
 @stub("token_log_probs", points=2, hint=HINT)
@@ -72,6 +76,7 @@ def test_gradient_flows_to_logits(student, reference, rng, ragged_batch):
 def test_sequence_log_prob_is_masked_sum(student, rng, ragged_batch):
     """One number per sequence: the masked sum of the direct token log-probabilities"""
     logits, tokens, mask = ragged_batch(rng, b=5)
+    mask[2, 0] = 1.0                                       # treated as 0: the first token has no prediction
     got = student.sequence_log_prob(logits, tokens, mask)
     check_array(_as_np(got), direct_token_log_probs(logits, tokens, mask).sum(1), rtol=1e-5, atol=1e-6)
 

@@ -48,3 +48,8 @@ def test_target_margin(student, rng):
     assert abs(scalar(student.ipo_loss(pc, pr, rc, rr, beta))) < 1e-9, "a margin of exactly 1/(2 beta) should cost 0"
     at_ref = scalar(student.ipo_loss(rc, rr, rc.clone(), rr.clone(), beta))
     expect_close(torch.tensor(at_ref), (1 / (2 * beta)) ** 2, "the loss at pi = pi_ref", rtol=1e-6)
+    half = torch.as_tensor(np.arange(5) < 2)               # two pairs at the target margin, three at the reference
+    mixed = scalar(student.ipo_loss(torch.where(half, pc, rc), torch.where(half, pr, rr), rc, rr, beta))
+    expect_close(torch.tensor(mixed), 3 / 5 * (1 / (2 * beta)) ** 2,
+                 "the loss with 2 of 5 pairs at the target margin and 3 at margin 0 (a mean of squares, not the square "
+                 "of the mean margin's distance)", rtol=1e-6)
