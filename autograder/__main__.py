@@ -143,6 +143,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         if missing:
             print(f"{len(missing)} student folder(s) hold no {assignment}/ (not handed in; not graded, not in the "
                   f"gradebook): {_listed(missing)}")
+        wrong = [r.submission for r in results if r.wrong_notebook]
+        if wrong:
+            print(f"{len(wrong)} submission(s) define none of {assignment}'s stubs (graded 0; another assignment's "
+                  f"notebook?): {_listed(wrong)}: the gradebook's reason column says what each seems to be")
         stray = [f for f in stray_files(folder) if shard.owns(f)]
         if stray:
             print(f"{len(stray)} file(s) beside the submissions are not notebooks (.ipynb), so not graded and not in "

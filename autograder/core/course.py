@@ -51,6 +51,15 @@ def check_assignment(assignment: str) -> None:
         raise SystemExit(f"unknown or ungradable assignment {assignment!r}; gradable ones: {known}")
 
 
+def stub_owner(names: set[str], exclude: str) -> str | None:
+    """The assignment other than ``exclude`` with the most stubs among ``names`` (grading ids and names a
+    notebook's code cells define), or None when no other assignment's stub is among them."""
+    counts = [(len(names & set(stub_names(other))), other) for other in assignment_ids()
+              if other != exclude and release_notebook(other).is_file()]  # a grading bundle may ship one assignment
+    best = max(counts, default=(0, None))
+    return best[1] if best[0] else None
+
+
 def stub_names(assignment: str) -> list[str]:
     """The graded stubs of an assignment, in notebook order (from its student notebook)."""
     from autograder.core.notebook import read_notebook, release_plan

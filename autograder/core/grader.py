@@ -25,7 +25,7 @@ import pytest
 
 from autograder.core import course
 from autograder.core.intake import NotebookError, read_code_cells
-from autograder.core.notebook import find_stubs, imported_modules, manual_cells, read_notebook, release_plan, with_parameters
+from autograder.core.notebook import code_cells, find_stubs, imported_modules, manual_cells, read_notebook, release_plan, with_parameters
 from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError, Reason, StubResult, TestOutcome
 from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import ProtocolError, decode, encode
@@ -316,6 +316,16 @@ class Grader:
             cells.append(Cell("suite helpers", self.helpers, module=HELPERS))
         return cells
 
+    def _wrong_notebook(self, nb) -> str:
+        """What a notebook that defines none of this assignment's stubs seems to be, in a sentence."""
+        names = {n for cell in code_cells(nb) for n in (cell.grade_id, *cell.defines) if n}
+        owner = course.stub_owner(names, self.assignment)
+        ours = ", ".join(self.expected[:4]) + (", ..." if len(self.expected) > 4 else "")
+        if owner:
+            return (f"this notebook defines none of {self.assignment}'s stubs ({ours}); its graded cells are "
+                    f"{owner}'s: was another assignment's notebook handed in?")
+        return f"this notebook defines none of {self.assignment}'s stubs ({ours}): is it this assignment's notebook?"
+
     def grade(self, path: str | Path, name: str | None = None) -> GradeResult:
         """Grade one notebook. A fault of the grader comes back as a result of status ``grader_error``,
         with no score; an unreadable submission as ``ungradable``."""
@@ -331,6 +341,9 @@ class Grader:
         self.last_test_stats = {}
         stubs, match_notes = find_stubs(nb, self.expected)
         result.notes += notes + match_notes
+        if self.expected and not stubs:
+            result.wrong_notebook = self._wrong_notebook(nb)
+            result.notes.insert(0, result.wrong_notebook)
         unrunnable = {name: match.problem for name, match in stubs.items() if match.problem}
         stubs = {name: match for name, match in stubs.items() if not match.problem}
         session = Session(self.zygote, self.cells_for(stubs), self.config, reference_call=self._reference_call,

@@ -67,7 +67,7 @@ def read_submission(path: str | Path) -> tuple[nbformat.NotebookNode, list[str]]
     return nb, notes
 
 
-def _code_cells(nb: SubmittedNotebook | nbformat.NotebookNode) -> list[CodeCell]:
+def code_cells(nb: SubmittedNotebook | nbformat.NotebookNode) -> list[CodeCell]:
     if isinstance(nb, SubmittedNotebook):
         return nb.cells
     return [CodeCell(c.get("source", ""), _nbgrader(c).get("grade_id"), defined_names(c.get("source", "")))
@@ -84,7 +84,7 @@ def find_stubs(nb: SubmittedNotebook | nbformat.NotebookNode, expected: list[str
     by_id: dict[str, StubMatch] = {}
     by_name: dict[str, StubMatch] = {}
     notes: list[str] = []
-    for cell in _code_cells(nb):
+    for cell in code_cells(nb):
         if cell.grade_id in expected:
             by_id[cell.grade_id] = StubMatch(cell.source, "grade_id", cell.problem)
             continue

@@ -105,6 +105,10 @@ class GradeResult:
     sandbox_cpu: float = 0.0
     """CPU seconds its sandbox workers' main threads used (cells and tests): what the grading process's own CPU
     accounts leave out, recorded so that a benchmark can count a class's whole cost (0 in older results)."""
+    wrong_notebook: str = ""
+    """Set when the notebook defines none of the assignment's stubs: what it seems to be instead (another
+    assignment's notebook, say). It is graded all the same (0 for every stub); the batch and the gradebook's
+    ``reason`` column name it, so that a wrong upload is seen (empty in older results)."""
 
     @property
     def score(self) -> float:
@@ -126,6 +130,7 @@ class GradeResult:
         by a character the submission chose."""
         self.submission, self.error = encodable(self.submission), None if self.error is None else encodable(self.error)
         self.notes = [encodable(n) for n in self.notes]
+        self.wrong_notebook = encodable(self.wrong_notebook)
         for stub in self.stubs:
             stub.note = encodable(stub.note)
             for test in stub.tests:
@@ -148,4 +153,5 @@ def result_from_dict(data: dict[str, Any]) -> GradeResult:
     status = data.get("status", UNGRADABLE if data["error"] else GRADED)
     return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
                        data["notes"], data["error"], data["isolation"], data["seconds"], status,
-                       str(data.get("suite_version", "")), float(data.get("sandbox_cpu", 0.0)))
+                       str(data.get("suite_version", "")), float(data.get("sandbox_cpu", 0.0)),
+                       str(data.get("wrong_notebook", "")))

@@ -42,12 +42,13 @@ def write_outputs(result: GradeResult, folder: Path) -> None:
 
 def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str] = ()) -> None:
     """The CSV gradebook: one row per submission, ungradable ones included with their reason, and grader
-    errors with empty score cells (never a zero: the student was not graded)."""
+    errors with empty score cells (never a zero: the student was not graded). A graded notebook that defines none
+    of the assignment's stubs has its zeros and, as its reason, what it seems to be (another assignment's, say)."""
     results = list(results)
     stubs = list(dict.fromkeys([*stubs, *(s.name for r in results for s in r.stubs)]))
     rows = [["submission", "score", "max_score", "percent", *stubs, "status", "reason"]]
     for r in sorted(results, key=lambda r: r.submission):
-        reason = csv_cell(cap(r.error or "", NOTE_CHARS))
+        reason = csv_cell(cap(r.error or r.wrong_notebook or "", NOTE_CHARS))
         if not r.has_score:
             rows.append([csv_cell(r.submission), "", "", "", *[""] * len(stubs), r.status, reason])
             continue

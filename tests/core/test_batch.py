@@ -193,3 +193,31 @@ def test_a_notebook_in_capitals_is_graded_and_files_that_are_no_notebooks_are_na
     assert "1 file(s) beside the submissions are not notebooks (.ipynb)" in done.stdout and "carol.py" in done.stdout
     rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
     assert sorted(rows) == ["alice", "bob", "dan"] and rows["alice"]["score"] == rows["alice"]["max_score"]
+
+
+def test_a_notebook_without_any_of_the_stubs_is_named_with_what_it_seems_to_be(open_tmp):
+    """Another assignment's notebook handed in under this one's name is graded 0 as before, and the batch, the
+    gradebook's reason column, the feedback and result.json say whose notebook it seems to be."""
+    import nbformat
+
+    from autograder.core.store import load_result
+
+    flat = open_tmp / "flat"
+    flat.mkdir()
+    shutil.copy(REPO / "autograder/samples/hw1_imitation/complete.ipynb", flat / "carol.ipynb")
+    shutil.copy(SAMPLES / "untouched.ipynb", flat / "erin.ipynb")
+    blank = nbformat.read(str(SAMPLES / "complete.ipynb"), 4)
+    blank.cells = [c for c in blank.cells if c.metadata.get("nbgrader", {}).get("grade_id") not in EXPECTED]
+    nbformat.write(blank, str(flat / "frank.ipynb"))
+    out = open_tmp / "out"
+    done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(flat), "--out", str(out),
+                           "--jobs", "2"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "2 submission(s) define none of hw0_setup's stubs" in done.stdout and "carol, frank" in done.stdout
+    rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
+    assert rows["carol"]["score"] == "0" and rows["carol"]["status"] == "graded"
+    assert "hw1_imitation's" in rows["carol"]["reason"]
+    assert "is it this assignment's notebook?" in rows["frank"]["reason"] and "hw1" not in rows["frank"]["reason"]
+    assert rows["erin"]["reason"] == "", "an untouched notebook has its stubs: nothing to say"
+    assert "hw1\\_imitation's" in (out / "carol" / "feedback.md").read_text()
+    assert "hw1_imitation's" in load_result(out / "carol").wrong_notebook
