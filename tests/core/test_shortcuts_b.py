@@ -19,6 +19,17 @@ pytestmark = pytest.mark.slow  # a few gradings: make test-fast leaves it out
 
 # assignment -> stub -> (source, the tests it must fail: "all", or the beginnings of their titles)
 SHORTCUTS: dict[str, dict[str, tuple[str, object]]] = {
+    "hw4_rlhf_dpo": {
+        # the right log-likelihoods with the policy's mean detached: only log_std would train [5/5 before]
+        "sequence_log_prob": ('''
+import math
+
+def sequence_log_prob(policy, obs, actions):
+    """Right values; the mean detached."""
+    z = (actions - policy(obs).detach()) / policy.log_std.exp()
+    return (-0.5 * z ** 2 - policy.log_std - 0.5 * math.log(2 * math.pi)).sum(-1).sum(-1)
+''', ["The gradient of the summed log-likelihood"]),
+    },
     "hw5_lm_alignment": {
         # a linear "loss" of the margin: its gradient agrees with its own finite differences and has the right
         # signs, and at margin -1000 it is 1000 like DPO's [3/6 before: the gradient and direction tests]
@@ -41,6 +52,22 @@ def token_log_probs(logits, tokens, mask):
     lp = F.log_softmax(logits, -1).roll(1, dims=1).gather(-1, tokens[..., None]).squeeze(-1)
     return torch.where(mask.bool(), lp, torch.zeros_like(lp))
 ''', ["Random logits and ragged masks"]),
+        # right values, no gradient: a detached sequence log-probability [3/3 before], a value term whose values
+        # are detached [8/8 before] (a reward-model loss with its rejected side detached, 5/5 before and 4/5 now,
+        # is not kept here: the hinge above holds that stub's place in this grading)
+        "sequence_log_prob": ('''
+def sequence_log_prob(logits, tokens, mask):
+    """Right values, detached from the logits."""
+    return token_log_probs(logits.detach(), tokens, mask).sum(-1)
+''', ["Appending padded columns"]),
+        "ppo_token_loss": ('''
+def ppo_token_loss(logp, logp_old, advantages, values, returns, mask, clip_eps=0.2, value_coef=0.5):
+    """Right value; the value head gets no gradient."""
+    mask = mask.float()
+    ratio = torch.exp(logp - logp_old)
+    pt = torch.maximum(-ratio * advantages, -ratio.clamp(1 - clip_eps, 1 + clip_eps) * advantages)
+    return ((pt + value_coef * (values.detach() - returns) ** 2) * mask).sum() / mask.sum()
+''', ["Zero advantages: the loss is value_coef"]),
     },
     "hw6_group_rl": {
         # the square of the mean margin's distance to the target: zero at the target and (1/(2 beta))^2 at the

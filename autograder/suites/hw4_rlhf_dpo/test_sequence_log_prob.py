@@ -47,10 +47,12 @@ def test_squashed_policy_uses_unsquashed_density(student, reference, rng):
 @stub("sequence_log_prob", points=1, hint="Use torch operations on the policy's output so the gradient reaches "
       "its parameters (no numpy, no detach, no torch.no_grad).")
 def test_gradient_reaches_the_policy(student, reference, rng):
-    """The gradient of the summed log-likelihood with respect to the policy's log-std"""
+    """The gradient of the summed log-likelihood with respect to the policy's log-std and its mean's bias"""
     obs, act = _seg(rng, 4, 6)
     got, want = (ns.helpers.parameter_grads("sequence_log_prob", [_policy(ns, 1, False, -0.5), obs, act],
-                                            names=["log_std"], grad_outputs=torch.ones(4))[1]["log_std"]
+                                            names=["log_std", "mean.bias"], grad_outputs=torch.ones(4))[1]
                  for ns in (student, reference))
-    assert got is not None, "no gradient reaches the policy's log_std: keep the computation in torch"
-    check_tensor(got, want, rtol=1e-4, atol=1e-4, name="d sum(log-likelihood) / d log_std")
+    assert got["log_std"] is not None, "no gradient reaches the policy's log_std: keep the computation in torch"
+    check_tensor(got["log_std"], want["log_std"], rtol=1e-4, atol=1e-4, name="d sum(log-likelihood) / d log_std")
+    assert got["mean.bias"] is not None, "no gradient reaches the policy's mean: do not detach its output"
+    check_tensor(got["mean.bias"], want["mean.bias"], rtol=1e-4, atol=1e-4, name="d sum(log-likelihood) / d mean.bias")

@@ -79,7 +79,8 @@ def test_ragged_batch_matches_reference(student, reference, rng):
     check_tensor(got, want, rtol=1e-6, atol=1e-9, name="the loss")
 
 
-@stub("ppo_token_loss", points=1, hint="value_coef times the masked mean of (values - returns)^2.")
+@stub("ppo_token_loss", points=1, hint="value_coef times the masked mean of (values - returns)^2, with its gradient "
+      "reaching the values.")
 def test_value_term(student):
     """Zero advantages: the loss is value_coef times the masked mean squared value error"""
     mask = torch.tensor([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
@@ -87,3 +88,9 @@ def test_value_term(student):
     got = _loss(student, lp=torch.zeros(2, 3), lp_old=torch.zeros(2, 3), adv=torch.zeros(2, 3), v=v, ret=ret,
                 mask=mask, eps=0.2, c=0.25)
     check_scalar(float(got), 0.25 * (1 + 4 + 9) / 3, name="the value loss")
+    args, kwargs = _args(lp=torch.zeros(2, 3), lp_old=torch.zeros(2, 3), adv=torch.zeros(2, 3), v=v, ret=ret, mask=mask,
+                         eps=0.2, c=0.25)
+    grad = student.helpers.grad("ppo_token_loss", args, kwargs, wrt=[3])[0]
+    assert type(grad) is torch.Tensor, "no gradient reaches the values: the value head must be trained by this loss (no detach)"
+    check_tensor(grad, 0.25 * 2 * (v - ret) * mask / 3, rtol=1e-6, atol=1e-9,
+                 name="d loss / d values (value_coef * 2 (V - G) / number of masked tokens, 0 off the mask)")

@@ -42,7 +42,9 @@ def test_extreme_scores(student):
 
 @stub("reward_model_loss", points=1, hint=HINT)
 def test_gradient(student, rng):
-    """d loss / d chosen = -(1 - sigmoid(c - r)) / N"""
+    """d loss / d chosen = -(1 - sigmoid(c - r)) / N, and its opposite for the rejected scores"""
     c, r = torch.as_tensor(rng.normal(size=6)), torch.as_tensor(rng.normal(size=6))
-    got = student.helpers.grad("reward_model_loss", [c, r], wrt=[0])[0]
+    got, got_r = student.helpers.grad("reward_model_loss", [c, r], wrt=[0, 1])
     check_tensor(got, -(1 - torch.sigmoid(c - r)) / 6, rtol=1e-6, atol=1e-9, name="the gradient")
+    assert got_r is not None, "no gradient reaches the rejected scores: both sides of the pair train the reward model"
+    check_tensor(got_r, (1 - torch.sigmoid(c - r)) / 6, rtol=1e-6, atol=1e-9, name="d loss / d rejected_scores")

@@ -81,8 +81,9 @@ def test_sequence_log_prob_is_masked_sum(student, rng, ragged_batch):
     check_array(_as_np(got), direct_token_log_probs(logits, tokens, mask).sum(1), rtol=1e-5, atol=1e-6)
 
 
-@stub("sequence_log_prob", points=1, hint=SEQ_HINT)
-def test_sequence_log_prob_ignores_padding(student, rng, ragged_batch):
+@stub("sequence_log_prob", points=1, hint=SEQ_HINT + " Keep the graph to the logits (with logits that need gradients, "
+      "the grader runs your own token_log_probs inside it).")
+def test_sequence_log_prob_ignores_padding(student, reference, rng, ragged_batch):
     """Appending padded columns (with any logits) to every sequence changes nothing, and the result is the masked sum"""
     logits, tokens, mask = ragged_batch(rng, b=3)
     base = _as_np(student.sequence_log_prob(logits, tokens, mask))
@@ -92,3 +93,8 @@ def test_sequence_log_prob_ignores_padding(student, rng, ragged_batch):
                                        torch.cat([tokens, torch.zeros(3, 4, dtype=tokens.dtype)], 1),
                                        torch.cat([mask, torch.zeros(3, 4, dtype=mask.dtype)], 1))
     check_array(_as_np(longer), base, rtol=1e-6, atol=1e-8, name="the result with 4 padded columns appended")
+    ones = torch.ones(len(tokens), dtype=logits.dtype)      # d (sum over sequences) / d logits
+    got, want = (ns.helpers.grad("sequence_log_prob", [logits, tokens, mask], wrt=[0], grad_outputs=ones)[0]
+                 for ns in (student, reference))
+    assert got is not None, "no gradient reaches the logits: keep the sum in torch, without detach or numpy"
+    check_tensor(got, want, rtol=1e-5, atol=1e-7, name="d sum(log pi(completion)) / d logits")
