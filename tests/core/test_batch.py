@@ -172,8 +172,14 @@ def test_one_zipped_folder_does_not_make_a_class_nbgrader_layout(tmp_path):
     assert sorted(e.name for e in discover(export, "hw0_setup", EXPECTED)) == ["s1", "s2", "s3"]
 
 
-def test_a_notebook_in_capitals_is_graded_and_files_that_are_no_notebooks_are_named(open_tmp, tmp_path):
+def test_what_a_folder_of_notebooks_holds_besides_this_assignments_work_is_named(open_tmp, tmp_path):
+    """In one batch: a notebook in capitals is graded; a file that is not a notebook is named and not graded;
+    another assignment's notebook (or one with every stub cell deleted) is graded 0 as before, and the batch, the
+    gradebook's reason column, the feedback and result.json say what it seems to be."""
+    import nbformat
+
     from autograder.core.batch import stray_files
+    from autograder.core.store import load_result
 
     flat = open_tmp / "flat"
     flat.mkdir()
@@ -183,41 +189,27 @@ def test_a_notebook_in_capitals_is_graded_and_files_that_are_no_notebooks_are_na
     (flat / ".DS_Store").write_bytes(b"\0")
     (flat / "dan").mkdir()
     shutil.copy(SAMPLES / "complete.ipynb", flat / "dan" / "HW0_SETUP.IPYNB")
+    shutil.copy(REPO / "autograder/samples/hw1_imitation/complete.ipynb", flat / "erin.ipynb")
+    shutil.copy(SAMPLES / "untouched.ipynb", flat / "fay.ipynb")
+    blank = nbformat.read(str(SAMPLES / "complete.ipynb"), 4)
+    blank.cells = [c for c in blank.cells if c.metadata.get("nbgrader", {}).get("grade_id") not in EXPECTED]
+    nbformat.write(blank, str(flat / "gus.ipynb"))
     assert stray_files(flat) == ["carol.py"]
     assert {e.name: e.notebook.name for e in discover(flat, "hw0_setup", EXPECTED)} == \
-        {"alice": "alice.IPYNB", "bob": "bob.ipynb", "dan": "HW0_SETUP.IPYNB"}
+        {"alice": "alice.IPYNB", "bob": "bob.ipynb", "dan": "HW0_SETUP.IPYNB", "erin": "erin.ipynb",
+         "fay": "fay.ipynb", "gus": "gus.ipynb"}
     out = open_tmp / "out"
     done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(flat), "--out", str(out),
                            "--jobs", "2"], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "1 file(s) beside the submissions are not notebooks (.ipynb)" in done.stdout and "carol.py" in done.stdout
+    assert "2 submission(s) define none of hw0_setup's stubs" in done.stdout and "erin, gus" in done.stdout
     rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
-    assert sorted(rows) == ["alice", "bob", "dan"] and rows["alice"]["score"] == rows["alice"]["max_score"]
-
-
-def test_a_notebook_without_any_of_the_stubs_is_named_with_what_it_seems_to_be(open_tmp):
-    """Another assignment's notebook handed in under this one's name is graded 0 as before, and the batch, the
-    gradebook's reason column, the feedback and result.json say whose notebook it seems to be."""
-    import nbformat
-
-    from autograder.core.store import load_result
-
-    flat = open_tmp / "flat"
-    flat.mkdir()
-    shutil.copy(REPO / "autograder/samples/hw1_imitation/complete.ipynb", flat / "carol.ipynb")
-    shutil.copy(SAMPLES / "untouched.ipynb", flat / "erin.ipynb")
-    blank = nbformat.read(str(SAMPLES / "complete.ipynb"), 4)
-    blank.cells = [c for c in blank.cells if c.metadata.get("nbgrader", {}).get("grade_id") not in EXPECTED]
-    nbformat.write(blank, str(flat / "frank.ipynb"))
-    out = open_tmp / "out"
-    done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(flat), "--out", str(out),
-                           "--jobs", "2"], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert "2 submission(s) define none of hw0_setup's stubs" in done.stdout and "carol, frank" in done.stdout
-    rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
-    assert rows["carol"]["score"] == "0" and rows["carol"]["status"] == "graded"
-    assert "hw1_imitation's" in rows["carol"]["reason"]
-    assert "is it this assignment's notebook?" in rows["frank"]["reason"] and "hw1" not in rows["frank"]["reason"]
-    assert rows["erin"]["reason"] == "", "an untouched notebook has its stubs: nothing to say"
-    assert "hw1\\_imitation's" in (out / "carol" / "feedback.md").read_text()
-    assert "hw1_imitation's" in load_result(out / "carol").wrong_notebook
+    assert sorted(rows) == ["alice", "bob", "dan", "erin", "fay", "gus"]
+    assert rows["alice"]["score"] == rows["alice"]["max_score"] == rows["dan"]["score"]
+    assert rows["erin"]["score"] == "0" and rows["erin"]["status"] == "graded"
+    assert "hw1_imitation's" in rows["erin"]["reason"]
+    assert "is it this assignment's notebook?" in rows["gus"]["reason"] and "hw1" not in rows["gus"]["reason"]
+    assert rows["fay"]["reason"] == rows["bob"]["reason"] == "", "a notebook with its stubs: nothing to say"
+    assert "hw1\\_imitation's" in (out / "erin" / "feedback.md").read_text()
+    assert "hw1_imitation's" in load_result(out / "erin").wrong_notebook
