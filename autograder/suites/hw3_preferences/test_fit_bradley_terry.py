@@ -1,5 +1,6 @@
 """Hidden tests of hw3's Bradley–Terry fits (gradient descent and Hunter's MM)."""
 import numpy as np
+from scipy.special import expit
 from scipy.stats import spearmanr
 
 from autograder.suite import check_array, stub
@@ -30,19 +31,38 @@ def _shipped_recovery(fit):
     return got, d
 
 
+def _gd_steps(n_items, i, j, mu, lr, n_steps):
+    """``n_steps`` steps of gradient descent on the mean loss from u = 0 (computed here), centred."""
+    u, mu = np.zeros(n_items), np.asarray(mu, dtype=float)
+    for _ in range(n_steps):
+        g = (expit(u[i] - u[j]) - mu) / len(i)
+        u = u - lr * (np.bincount(i, g, minlength=n_items) - np.bincount(j, g, minlength=n_items))
+    return u - u.mean()
+
+
+def _check_gradient_descent(student, n_items, i, j, mu):
+    """The maximum-likelihood utilities alone are reached by any optimiser (scipy's, or the MM fit called from here):
+    the fit must also be the documented descent, which two steps of a given size from zero show."""
+    check_array(student.fit_bradley_terry(n_items, i, j, mu, lr=2.5, n_steps=2), _gd_steps(n_items, i, j, mu, 2.5, 2),
+                rtol=1e-6, atol=1e-10, name="the utilities after n_steps = 2 steps of size lr = 2.5 (gradient descent "
+                "on bt_loss from u = 0: u <- u - lr * gradient, not another optimiser)")
+
+
 @stub("fit_bradley_terry", points=2, hint=GD_HINT)
 def test_gd_recovers_shipped_utilities(student, reference):
-    """On the shipped items: mean zero, Spearman >= 0.95, and the maximum-likelihood values"""
+    """On the shipped items: mean zero, Spearman >= 0.95, and the maximum-likelihood values, by gradient descent"""
     got, d = _shipped_recovery(student.fit_bradley_terry)
     check_array(got, reference.fit_bradley_terry_mm(d["n_items"], d["i"], d["j"], d["mu"]), atol=1e-4,
                 name="the fitted utilities")
+    _check_gradient_descent(student, d["n_items"], d["i"], d["j"], d["mu"])
 
 
 @stub("fit_bradley_terry", points=1, hint=GD_HINT)
 def test_gd_random_instance(student, reference, rng):
-    """A random instance with ties: the maximum-likelihood utilities"""
+    """A random instance with ties: the maximum-likelihood utilities, and two steps of gradient descent"""
     _, i, j, mu = _random_instance(rng)
     check_array(student.fit_bradley_terry(15, i, j, mu), reference.fit_bradley_terry_mm(15, i, j, mu), atol=1e-4)
+    _check_gradient_descent(student, 15, i, j, mu)
 
 
 @stub("fit_bradley_terry_mm", points=2, hint=MM_HINT)
