@@ -31,6 +31,8 @@ def test_fractions_and_coverage_on_random_labels(student, rng):
     for _ in range(3):
         sides = _labels(rng, int(rng.integers(20, 60)), rng.dirichlet(np.ones(3)))
         expert = _labels(rng, int(rng.integers(10, 40)), rng.dirichlet(np.ones(3)) * 0.8 + np.array([0.1, 0.1, 0.0]))
+        if not (expert != 0).any():   # about 1 draw in 2,000: an expert that never passed has no coverage (the stub
+            expert[rng.integers(len(expert))] = rng.choice([1, -1])   # must raise), so one of its episodes passes
         p, coverage = _want(sides, expert)
         got = _call(student, sides, expert)
         for key, side in (("left", 1), ("right", -1), ("not_passed", 0)):
