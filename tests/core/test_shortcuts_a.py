@@ -1,0 +1,192 @@
+"""Shortcuts through hw0-hw3's hidden suites, and implementations their docstrings allow (a red-team audit).
+
+Each case grades the release notebook with a few stubs written as a lazy or cheating student would (every other stub
+left as released, so it raises) and checks the score of each: "zero" for a shortcut that skips the stub's work,
+"full" for a correct variant the docstring allows. Before the fixes these cases scored:
+
+- hw2 ``maxent_irl``, one gradient at w = 0 scaled up (no ascent): 2/8, the return test (any weights near the true
+  direction earn the expert's return); now that test also asks for the fit's feature expectations.
+- hw2 ``deep_maxent_irl``, the expert's visit counts (or their log) as the reward, no network: 2/5, the learning test;
+  now it also asks for the reward the documented training reaches (correlation with the reference's).
+- hw3 ``fit_bradley_terry`` answered by the MM fit or by scipy's BFGS on the loss (no gradient descent): 3/3; now both
+  tests also ask for two steps of gradient descent of a given size from zero.
+- hw3 ``select_queries`` with ``np.argsort(var)[::-1]`` (ties the other way round, which the docstring leaves open):
+  lost 2 to 4 points on about two draws in three (random candidate pools repeat pairs); now judged by the variances
+  of the pairs chosen.
+- hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
+  at float32's precision.
+"""
+from __future__ import annotations
+
+import sys
+
+import nbformat
+import numpy as np
+import pytest
+
+from autograder.authoring.samples import _with_stubs, solution_sources
+from autograder.core import course
+from autograder.core.grader import Grader
+
+pytestmark = pytest.mark.slow  # a few gradings: make test-fast leaves it out
+
+MADE_UP = '{"grad_norm": np.array([1.0, 0.0]), "log_likelihood": np.array([-1.0, 0.0])}'
+
+HW2_SHORTCUTS = {
+    "maxent_irl": f'''
+def maxent_irl(P, features, p0, trajectories, horizon, actions=None, lr=1.0, n_iters=500, tol=1e-4):
+    """No ascent: the gradient at w = 0, scaled up (any weights near the true direction earn the expert's return)."""
+    features = np.asarray(features, dtype=float)
+    mu = features[np.asarray(trajectories)].sum(axis=1).mean(axis=0)
+    g = mu - features.T @ state_visitation_frequency(P, soft_value_iteration(P, np.zeros(len(features)), horizon),
+                                                     p0, horizon)
+    return 30.0 * g / np.linalg.norm(g), {MADE_UP}
+''',
+    "deep_maxent_irl": '''
+def deep_maxent_irl(P, features, p0, trajectories, horizon, actions=None, hidden=32, lr=0.01, n_iters=200,
+                    weight_decay=1e-4, seed=0):
+    """No network: the log of the expert's visit counts as the reward, and a made-up history."""
+    states = np.asarray(trajectories)
+    visits = np.bincount(states.ravel(), minlength=np.asarray(P).shape[0]) / states.shape[0]
+    return np.log(visits + 1e-2), {"grad_norm": np.linspace(1, 0, n_iters), "log_likelihood": np.linspace(-9, -1, n_iters)}
+''',
+}
+
+HW3_GD_BY_MM = '''
+def fit_bradley_terry(n_items, i, j, mu, lr=None, n_steps=5000, tol=1e-9):
+    """No gradient descent: the MM fit, which reaches the same maximum."""
+    return fit_bradley_terry_mm(n_items, i, j, mu)
+'''
+HW3_GD_BY_SCIPY = '''
+def fit_bradley_terry(n_items, i, j, mu, lr=None, n_steps=5000, tol=1e-9):
+    """No gradient descent: scipy's BFGS on the loss."""
+    from scipy.optimize import minimize
+    res = minimize(lambda u: bt_loss(u, i, j, mu), np.zeros(n_items), jac=lambda u: bt_gradient(u, i, j, mu),
+                   method="BFGS", options={"gtol": 1e-12, "maxiter": 10000})
+    return res.x - res.x.mean()
+'''
+HW3_SELECT_REVERSED = '''
+def select_queries(ensemble, obs, act, candidates, k):
+    """Allowed: equal variances in the other order (np.argsort ascending, reversed)."""
+    candidates = np.asarray(candidates)
+    with torch.no_grad():
+        R = ensemble(torch.as_tensor(obs), torch.as_tensor(act)).sum(-1)
+        p = torch.sigmoid(R[:, candidates[:, 0]] - R[:, candidates[:, 1]])
+        var = p.var(dim=0).numpy()
+    return np.argsort(var)[::-1][:k].astype(np.int64)
+'''
+HW3_SELECT_TOPK = '''
+def select_queries(ensemble, obs, act, candidates, k):
+    """Allowed: float64, the population variance, and torch.topk (whose order of equal values is its own)."""
+    candidates = np.asarray(candidates)
+    with torch.no_grad():
+        R = ensemble(torch.as_tensor(obs), torch.as_tensor(act)).sum(-1).double()
+        var = torch.sigmoid(R[:, candidates[:, 0]] - R[:, candidates[:, 1]]).var(dim=0, unbiased=False)
+    return torch.topk(var, k).indices.numpy().astype(np.int64)
+'''
+HW3_RATINGS_LOOP = '''
+def ratings_to_comparisons(annotator, segment, rating, window=5):
+    """Allowed: a loop over ratings in session order (the pairs in another order than the reference's)."""
+    pairs, mu = [], []
+    for m in range(len(annotator)):
+        later = [q for q in range(m + 1, len(annotator)) if annotator[q] == annotator[m]][:window]
+        for q in later:
+            if segment[q] != segment[m]:
+                pairs.append((segment[m], segment[q]))
+                mu.append(1.0 if rating[m] > rating[q] else 0.5 if rating[m] == rating[q] else 0.0)
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(mu, dtype=float)
+'''
+HW2_DEEP_ALLOWED = '''
+def deep_maxent_irl(P, features, p0, trajectories, horizon, actions=None, hidden=32, lr=0.01, n_iters=200,
+                    weight_decay=1e-4, seed=0):
+    """Allowed: a float64 network (built as documented, then converted), loops, and reward.backward(-grad)."""
+    states = np.asarray(trajectories)
+    n_states = np.asarray(P).shape[0]
+    d_expert = np.zeros(n_states)
+    for row in states:
+        for s in row:
+            d_expert[s] += 1
+    d_expert /= len(states)
+    torch.manual_seed(seed)
+    net = torch.nn.Sequential(torch.nn.Linear(features.shape[1], hidden), torch.nn.ReLU(),
+                              torch.nn.Linear(hidden, hidden), torch.nn.ReLU(), torch.nn.Linear(hidden, 1)).double()
+    x = torch.tensor(features, dtype=torch.float64)
+    opt = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
+    grad_norm, log_likelihood = [], []
+    for _ in range(n_iters):
+        r = net(x)[:, 0]
+        pi = soft_value_iteration(P, r.detach().numpy(), horizon)
+        g = d_expert - state_visitation_frequency(P, pi, p0, horizon)
+        grad_norm.append(float(np.sqrt((g ** 2).sum())))
+        if actions is not None:
+            log_likelihood.append(float(np.mean([sum(np.log(pi[t, s, a]) for t, (s, a) in enumerate(zip(srow, arow)))
+                                                 for srow, arow in zip(states, actions)])))
+        opt.zero_grad()
+        r.backward(-torch.tensor(g))
+        opt.step()
+    with torch.no_grad():
+        return net(x)[:, 0].numpy(), {"grad_norm": np.array(grad_norm), "log_likelihood": np.array(log_likelihood)}
+'''
+HW0_FLOAT32 = '''
+def discounted_returns(rewards, gamma):
+    """Allowed: float32 throughout ("a float array")."""
+    r = np.asarray(rewards, dtype=np.float32)
+    out, running = np.zeros_like(r), np.zeros(r.shape[0], dtype=np.float32)
+    for t in reversed(range(r.shape[1])):
+        running = r[:, t] + np.float32(gamma) * running
+        out[:, t] = running
+    return out
+'''
+
+SOLVED = {a: solution_sources(a) for a in ("hw2_maxent_irl", "hw3_preferences")}
+
+# (assignment, the stubs written, the score each must get: "zero" or "full")
+CASES = [
+    ("hw0_setup", {"discounted_returns": HW0_FLOAT32}, {"discounted_returns": "full"}),
+    ("hw2_maxent_irl", HW2_SHORTCUTS, {"maxent_irl": "zero", "deep_maxent_irl": "zero"}),
+    ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED}, {"deep_maxent_irl": "full"}),
+    ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_MM,
+                         "fit_bradley_terry_mm": SOLVED["hw3_preferences"]["fit_bradley_terry_mm"],
+                         "select_queries": HW3_SELECT_REVERSED, "ratings_to_comparisons": HW3_RATINGS_LOOP},
+     {"fit_bradley_terry": "zero", "fit_bradley_terry_mm": "full", "select_queries": "full",
+      "ratings_to_comparisons": "full"}),
+    ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_SCIPY, "bt_loss": SOLVED["hw3_preferences"]["bt_loss"],
+                         "select_queries": HW3_SELECT_TOPK},
+     {"fit_bradley_terry": "zero", "select_queries": "full"}),
+]
+
+
+@pytest.mark.parametrize("case", range(len(CASES)), ids=[f"{a}-{'-'.join(w)}" for a, _, w in CASES])
+def test_shortcuts_earn_nothing_and_allowed_variants_everything(case, open_tmp):
+    assignment, stubs, want = CASES[case]
+    path = open_tmp / f"{assignment}_{case}.ipynb"
+    nbformat.write(_with_stubs(assignment, stubs), str(path))
+    grader = Grader(assignment)
+    try:
+        result = grader.grade(path)
+    finally:
+        grader.close()
+    assert result.has_score, result.error
+    scores = {s.name: s for s in result.stubs}
+    for name, outcome in want.items():
+        stub = scores[name]
+        failed = [f"{t.name}: {t.message}" for t in stub.tests if not t.passed]
+        if outcome == "zero":
+            assert stub.max_score > 0 and stub.score == 0, f"{assignment} {name}: the shortcut earned {stub.score}"
+        else:
+            assert stub.score == stub.max_score, f"{assignment} {name}: an allowed variant lost points: {failed}"
+
+
+def test_select_queries_accepts_either_order_of_equal_variances():
+    """hw3's selection check: a repeated candidate (equal variances) may come in either order, a wrong pick may not."""
+    sys.path.insert(0, str(course.suite_dir("hw3_preferences")))
+    try:
+        from test_select_queries import _check_selection
+    finally:
+        sys.path.pop(0)
+    var = np.array([0.1, 0.3, 0.3, 0.05, 0.2])           # candidates 1 and 2 are the same pair
+    for got in ([1, 2, 4], [2, 1, 4]):
+        _check_selection(np.array(got), var, 3, "the selection")
+    for wrong in ([1, 4, 2], [1, 2, 0], [1, 1, 4]):
+        with pytest.raises(AssertionError):
+            _check_selection(np.array(wrong), var, 3, "the selection")
