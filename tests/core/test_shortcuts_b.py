@@ -301,14 +301,15 @@ def rft_select(tokens, correct, group, max_per_prompt):
 ''',
         "binary_group_advantages": '''
 def binary_group_advantages(k, group, kind="grpo", eps=1e-4):
-    """The group's rewards written out, row by row."""
+    """The group's rewards written out row by row with torch.ones / torch.zeros (float32), the table cast to float64
+    at the end [1/7 before: tables compared at rtol 1e-9]."""
     if group < 2 or kind not in ("grpo", "dr_grpo", "rloo"):
         raise ValueError("bad group or kind")
-    out = torch.zeros(len(k), 2, dtype=torch.float64)
+    out = torch.zeros(len(k), 2)
     for i, kk in enumerate(torch.as_tensor(k).tolist()):
         if kk in (0, group):
             continue
-        r = torch.cat([torch.ones(kk), torch.zeros(group - kk)]).double()
+        r = torch.cat([torch.ones(kk), torch.zeros(group - kk)])
         if kind == "grpo":
             a = (r - r.mean()) / (r.std() + eps)
         elif kind == "dr_grpo":
@@ -316,7 +317,7 @@ def binary_group_advantages(k, group, kind="grpo", eps=1e-4):
         else:
             a = r - (r.sum() - r) / (group - 1)
         out[i] = torch.stack([a[0], a[-1]])
-    return out
+    return out.double()
 ''',
     },
     "hw7b_ai_feedback": {
@@ -343,13 +344,11 @@ def online_dpo_round(policy, ref, prompts, annotator, optimizer, beta, generator
 ''',
         "rule_critic": '''
 def rule_critic(rules, a, b, weights=None):
-    """Votes as differences of comparisons, numpy weights."""
-    w = np.ones(len(rules)) if weights is None else np.asarray(weights, dtype=float)
-    total = torch.zeros(a.shape[0], dtype=torch.float64)
-    for wk, rule in zip(w, rules):
-        sa, sb = torch.as_tensor(rule(a)), torch.as_tensor(rule(b))
-        total += float(wk) * ((sa > sb).double() - (sa < sb).double())
-    return 0.5 + 0.5 * total / w.sum()
+    """Votes as differences of comparisons, the weights as torch.tensor(weights) (float32) [3/5 before: verdicts
+    compared at rtol 1e-9]."""
+    w = torch.ones(len(rules)) if weights is None else torch.tensor(weights)
+    votes = torch.stack([(r(a) > r(b)).double() - (r(a) < r(b)).double() for r in rules], dim=1)
+    return 0.5 + 0.5 * (votes * w).sum(1) / w.sum()
 ''',
         "position_swap": '''
 def position_swap(judge, a, b):
