@@ -13,6 +13,8 @@ left as released, so it raises) and checks the score of each: "zero" for a short
 - hw3 ``select_queries`` with ``np.argsort(var)[::-1]`` (ties the other way round, which the docstring leaves open):
   lost 2 to 4 points on about two draws in three (random candidate pools repeat pairs); now judged by the variances
   of the pairs chosen.
+- hw2 ``maxent_irl`` with the sample variance (ddof = 1) in its step scale: 7/8, the documented-steps test; the
+  docstring's "variance over the demonstrations" allows either, and both are accepted now.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -139,12 +141,17 @@ def discounted_returns(rewards, gamma):
 '''
 
 SOLVED = {a: solution_sources(a) for a in ("hw2_maxent_irl", "hw3_preferences")}
+POPULATION = "features[states].sum(axis=1).var(axis=0)"
+assert POPULATION in SOLVED["hw2_maxent_irl"]["maxent_irl"], "the reference maxent_irl's step scale has moved"
+# Allowed: "the variance over the demonstrations" read as the sample variance (ddof = 1)
+HW2_SAMPLE_VARIANCE = SOLVED["hw2_maxent_irl"]["maxent_irl"].replace(POPULATION, POPULATION[:-1] + ", ddof=1)")
 
 # (assignment, the stubs written, the score each must get: "zero" or "full")
 CASES = [
     ("hw0_setup", {"discounted_returns": HW0_FLOAT32}, {"discounted_returns": "full"}),
     ("hw2_maxent_irl", HW2_SHORTCUTS, {"maxent_irl": "zero", "deep_maxent_irl": "zero"}),
-    ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED}, {"deep_maxent_irl": "full"}),
+    ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED, "maxent_irl": HW2_SAMPLE_VARIANCE},
+     {"deep_maxent_irl": "full", "maxent_irl": "full"}),
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_MM,
                          "fit_bradley_terry_mm": SOLVED["hw3_preferences"]["fit_bradley_terry_mm"],
                          "select_queries": HW3_SELECT_REVERSED, "ratings_to_comparisons": HW3_RATINGS_LOOP},
