@@ -26,6 +26,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -103,7 +104,9 @@ def _listed(names: list[str], shown: int = 20) -> str:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from autograder.core.batch import Shard, assignment_folder, assignments_in, missing_submissions, stray_files
+    from autograder.core.batch import (Shard, assignment_folder, assignments_in, handed_in_anew, missing_submissions,
+                                       stray_files)
+    from autograder.core import course
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
     from autograder.outputs.files import grade_folder
     from autograder.outputs.text import plain
@@ -143,6 +146,17 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         if missing:
             print(f"{len(missing)} student folder(s) hold no {assignment}/ (not handed in; not graded, not in the "
                   f"gradebook): {_listed(missing)}")
+        anew = handed_in_anew(out, shard)
+        if anew:
+            print(f"{len(anew)} submission(s) were handed in again after they were graded, so were graded again "
+                  f"(the earlier results are kept in {out / '_previous'}): {_listed(anew)}")
+        version = course.suite_version(assignment)
+        older = [r.submission for r in results if r.suite_version and r.suite_version != version]
+        if older:
+            print(f"{len(older)} result(s) were graded by an earlier version of {assignment}'s suite, so the gradebook "
+                  f"mixes two suites: python -m autograder regrade {assignment} {shlex.quote(str(args.folder))} --out "
+                  f"{shlex.quote(str(out))} grades them "
+                  f"all with this one, keeping the earlier results: {_listed(older)}", file=sys.stderr)
         wrong = [r.submission for r in results if r.wrong_notebook]
         if wrong:
             print(f"{len(wrong)} submission(s) define none of {assignment}'s stubs (graded 0; another assignment's "

@@ -24,7 +24,7 @@ from autograder.core.grader import Grader
 from autograder.core.intake import NotebookError, read_code_cells, walk_notebooks
 from autograder.core.notebook import find_stubs
 from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError
-from autograder.core.store import atomic_write, load_result, save_result
+from autograder.core.store import RESULT_NAME, archive_results, atomic_write, load_result, notebook_digest, save_result
 
 Writer = Callable[[GradeResult, Path], None]
 """Renders one result into its submission's folder (``autograder.outputs.files.render_files``); called in the
@@ -302,7 +302,9 @@ def _grade_one(entry: Entry, out_dir: str, assignment: str, write: Writer | None
     if _grader is None:
         result = _unscored(assignment, entry, _grader_failure or "the grader could not be built", GRADER_ERROR)
     else:
+        digest = _digest(entry.notebook)  # before grading: the record names the notebook that was read
         result = _grader.grade(entry.notebook, name=entry.name)
+        result.notebook_sha256 = digest
     if entry.note:
         result.notes.insert(0, entry.note)
     _finish(result, Path(out_dir) / entry.name, write)
@@ -319,10 +321,48 @@ def _done(out_dir: Path, name: str) -> bool:
     return result is not None and result.status != GRADER_ERROR
 
 
+def _digest(path: Path | None) -> str:
+    try:
+        return notebook_digest(path) if path is not None else ""
+    except OSError:
+        return ""
+
+
+def _handed_in_anew(out_dir: Path, entries: list[Entry]) -> list[Entry]:
+    """The entries whose recorded result graded another notebook than the one there now (a student who handed in
+    again after the batch ran): their results are archived in ``_previous/`` and they are graded again, each with
+    a note saying so. Results older than the recorded digest are taken as they are."""
+    changed = []
+    for e in entries:
+        old = _load(out_dir, e.name) if e.notebook is not None else None
+        if old is not None and old.status != GRADER_ERROR and old.notebook_sha256 \
+                and old.notebook_sha256 != _digest(e.notebook):
+            changed.append((e, old))
+    if not changed:
+        return []
+    kept = archive_results(out_dir, [e.name for e, _ in changed], [GRADEBOOK_NAME])
+    for e, old in changed:
+        score = f"{old.score:g}/{old.max_score:g}" if old.has_score else old.status
+        note = (f"graded again: this notebook is not the one graded before (that grading, {score}, is kept in "
+                f"{kept.relative_to(out_dir).as_posix()}/)")
+        e.note = f"{note}; {e.note}" if e.note else note
+        (out_dir / e.name / RESULT_NAME).unlink(missing_ok=True)
+    return [e for e, _ in changed]
+
+
 def _unscored(assignment: str, entry: Entry, reason: str, status: str) -> GradeResult:
     """A result with no tests run: ``ungradable`` (the submission's fault) or ``grader_error`` (ours)."""
     return GradeResult(assignment, entry.name, [], [], [entry.note] if entry.note else [], reason, status=status,
                        suite_version=course.suite_version(assignment))
+
+
+def handed_in_anew(out_dir: Path, shard: Shard = Shard()) -> list[str]:
+    """The submissions the last run of ``shard``'s batch into ``out_dir`` graded again because their notebook had
+    changed since an earlier run graded it (from the batch's manifest; empty when there is none)."""
+    try:
+        return list(json.loads((Path(out_dir) / shard.manifest_name).read_text(encoding="utf-8"))["handed_in_anew"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
 
 
 def names_digest(names: list[str]) -> str:
@@ -331,11 +371,11 @@ def names_digest(names: list[str]) -> str:
 
 
 def write_manifest(out_dir: Path, assignment: str, shard: Shard, all_names: list[str], names: list[str],
-                   missing: list[str] = ()) -> None:
+                   missing: list[str] = (), handed_in_anew: list[str] = ()) -> None:
     manifest = {"assignment": assignment, "suite_version": course.suite_version(assignment),
                 "shard": [shard.k, shard.n], "folder_submissions": len(all_names),
                 "folder_digest": names_digest(all_names), "submissions": sorted(names),
-                "missing": sorted(missing)}
+                "missing": sorted(missing), "handed_in_anew": sorted(handed_in_anew)}
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write(out_dir / shard.manifest_name, json.dumps(manifest, indent=1))
 
@@ -358,8 +398,9 @@ def _prepare(batch: Batch, write: Writer | None) -> tuple[list[Entry], list[Entr
     entries = discover(batch.folder, assignment, expected)
     all_names = [e.name for e in entries]
     entries = [e for e in entries if shard.owns(e.name)]
+    anew = _handed_in_anew(out_dir, entries)
     write_manifest(out_dir, assignment, shard, all_names, [e.name for e in entries],
-                   [m for m in missing_submissions(batch.folder, assignment) if shard.owns(m)])
+                   [m for m in missing_submissions(batch.folder, assignment) if shard.owns(m)], [e.name for e in anew])
     todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):

@@ -105,6 +105,9 @@ class GradeResult:
     sandbox_cpu: float = 0.0
     """CPU seconds its sandbox workers' main threads used (cells and tests): what the grading process's own CPU
     accounts leave out, recorded so that a benchmark can count a class's whole cost (0 in older results)."""
+    notebook_sha256: str = ""
+    """:func:`autograder.core.store.notebook_digest` of the notebook graded (empty when none was read, and in older
+    results): a batch run again grades a submission anew when its notebook changed."""
     wrong_notebook: str = ""
     """Set when the notebook defines none of the assignment's stubs: what it seems to be instead (another
     assignment's notebook, say). It is graded all the same (0 for every stub); the batch and the gradebook's
@@ -154,4 +157,4 @@ def result_from_dict(data: dict[str, Any]) -> GradeResult:
     return GradeResult(data["assignment"], data["submission"], stubs, [tuple(m) for m in data["manual"]],
                        data["notes"], data["error"], data["isolation"], data["seconds"], status,
                        str(data.get("suite_version", "")), float(data.get("sandbox_cpu", 0.0)),
-                       str(data.get("wrong_notebook", "")))
+                       str(data.get("notebook_sha256", "")), str(data.get("wrong_notebook", "")))

@@ -11,10 +11,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from autograder.core.store import RESULT_NAME
+from autograder.core.store import PREVIOUS_DIR, RESULT_NAME
 from autograder.core.results import GradeResult, result_from_dict
 
-PREVIOUS_DIR = "_previous"
 """Where a regrade archives the results it replaces: ``DIR/_previous/<UTC stamp>/<submission>/``."""
 STUDENTS_NAME = "_students.json"
 """``{submission: [student id, ...]}``, written by the gradebook sync for the commands after it."""

@@ -23,16 +23,14 @@ folders (``DIR/_previous/<time>`` and ``DIR``, say).
 """
 from __future__ import annotations
 
-import shutil
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from pathlib import Path
 
 from autograder.core import course
 from autograder.core.batch import GRADEBOOK_NAME, discover
 from autograder.outputs.files import grade_folder
-from autograder.outputs.batch_output import PREVIOUS_DIR, read_results, read_students
-from autograder.core.store import RESULT_NAME
+from autograder.outputs.batch_output import read_results, read_students
+from autograder.core.store import RESULT_NAME, archive_results
 from autograder.core.results import GRADED, GRADER_ERROR, GradeResult
 
 
@@ -104,18 +102,7 @@ def change_lines(changes: list[Change], written: dict[str, float | None] | None 
 
 def archive(out_dir: Path, names: list[str]) -> Path:
     """Copy the named submissions' results and the batch's gradebook into ``out_dir/_previous/<UTC time>/``."""
-    out_dir = Path(out_dir)
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    dest, n = out_dir / PREVIOUS_DIR / stamp, 2
-    while dest.exists():
-        dest, n = out_dir / PREVIOUS_DIR / f"{stamp}-{n}", n + 1
-    dest.mkdir(parents=True)
-    for name in names:
-        if (out_dir / name).is_dir():
-            shutil.copytree(out_dir / name, dest / name, symlinks=True)
-    if (out_dir / GRADEBOOK_NAME).is_file():
-        shutil.copy2(out_dir / GRADEBOOK_NAME, dest / GRADEBOOK_NAME)
-    return dest
+    return archive_results(out_dir, names, [GRADEBOOK_NAME])
 
 
 def written_scores(assignment: str, out_dir: Path, course_root: Path | None) -> dict[str, float | None]:

@@ -213,3 +213,47 @@ def test_what_a_folder_of_notebooks_holds_besides_this_assignments_work_is_named
     assert rows["fay"]["reason"] == rows["bob"]["reason"] == "", "a notebook with its stubs: nothing to say"
     assert "hw1\\_imitation's" in (out / "erin" / "feedback.md").read_text()
     assert "hw1_imitation's" in load_result(out / "erin").wrong_notebook
+
+
+def test_a_notebook_handed_in_again_is_graded_again_and_an_older_suites_results_are_named(open_tmp):
+    """Run again after a student handed in anew, the batch grades that notebook (not the recorded result of the
+    earlier one), keeps the earlier result in _previous/, and says so; a third run grades nothing. Results of an
+    earlier suite version are named with the regrade command; a result recorded before digests is kept."""
+    import json
+
+    flat = open_tmp / "flat"
+    flat.mkdir()
+    shutil.copy(SAMPLES / "untouched.ipynb", flat / "alice.ipynb")
+    shutil.copy(SAMPLES / "partial.ipynb", flat / "bob.ipynb")
+    shutil.copy(SAMPLES / "partial.ipynb", flat / "cy.ipynb")
+    out = open_tmp / "out"
+
+    def batch() -> subprocess.CompletedProcess:
+        done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(flat), "--out", str(out),
+                               "--jobs", "2"], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done
+
+    def scores() -> dict[str, str]:
+        return {r["submission"]: r["score"] for r in csv.DictReader((out / "gradebook.csv").open())}
+
+    batch()
+    assert scores() == {"alice": "0", "bob": "5", "cy": "5"}
+    record = out / "cy" / "result.json"
+    older = json.loads(record.read_text())
+    older["notebook_sha256"] = ""                       # as recorded before digests: taken as it is
+    record.write_text(json.dumps(older))
+    shutil.copy(SAMPLES / "complete.ipynb", flat / "alice.ipynb")
+    shutil.copy(SAMPLES / "complete.ipynb", flat / "cy.ipynb")
+    again = batch()
+    assert "1 submission(s) were handed in again after they were graded" in again.stdout and "alice" in again.stdout
+    assert scores() == {"alice": "8", "bob": "5", "cy": "5"}
+    kept = [p for p in (out / "_previous").iterdir() if p.is_dir()]
+    assert len(kept) == 1 and json.loads((kept[0] / "alice" / "result.json").read_text())["stubs"][0]["tests"]
+    assert "graded again" in (out / "alice" / "feedback.md").read_text()
+    bob = json.loads((out / "bob" / "result.json").read_text())
+    bob["suite_version"] = "an-earlier-one"
+    (out / "bob" / "result.json").write_text(json.dumps(bob))
+    third = batch()
+    assert "handed in again" not in third.stdout and len(list((out / "_previous").iterdir())) == 1
+    assert "1 result(s) were graded by an earlier version of hw0_setup's suite" in third.stderr and "bob" in third.stderr
