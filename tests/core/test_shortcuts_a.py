@@ -15,6 +15,9 @@ left as released, so it raises) and checks the score of each: "zero" for a short
   of the pairs chosen.
 - hw2 ``maxent_irl`` with the sample variance (ddof = 1) in its step scale: 7/8, the documented-steps test; the
   docstring's "variance over the demonstrations" allows either, and both are accepted now.
+- hw2 ``deep_maxent_irl`` with its layers built in float64 (``nn.Linear(..., dtype=torch.float64)``, which draws other
+  initial weights under the same seed than float32 layers): 3/5, refused by the two tests that compare with the
+  reference's initial network; the docstring leaves the dtype open, and either network is accepted now.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -101,7 +104,7 @@ def ratings_to_comparisons(annotator, segment, rating, window=5):
 HW2_DEEP_ALLOWED = '''
 def deep_maxent_irl(P, features, p0, trajectories, horizon, actions=None, hidden=32, lr=0.01, n_iters=200,
                     weight_decay=1e-4, seed=0):
-    """Allowed: a float64 network (built as documented, then converted), loops, and reward.backward(-grad)."""
+    """Allowed: layers built in float64 (other initial weights than float32 layers), loops, reward.backward(-grad)."""
     states = np.asarray(trajectories)
     n_states = np.asarray(P).shape[0]
     d_expert = np.zeros(n_states)
@@ -110,8 +113,9 @@ def deep_maxent_irl(P, features, p0, trajectories, horizon, actions=None, hidden
             d_expert[s] += 1
     d_expert /= len(states)
     torch.manual_seed(seed)
-    net = torch.nn.Sequential(torch.nn.Linear(features.shape[1], hidden), torch.nn.ReLU(),
-                              torch.nn.Linear(hidden, hidden), torch.nn.ReLU(), torch.nn.Linear(hidden, 1)).double()
+    layer = lambda n_in, n_out: torch.nn.Linear(n_in, n_out, dtype=torch.float64)
+    net = torch.nn.Sequential(layer(features.shape[1], hidden), torch.nn.ReLU(), layer(hidden, hidden), torch.nn.ReLU(),
+                              layer(hidden, 1))
     x = torch.tensor(features, dtype=torch.float64)
     opt = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
     grad_norm, log_likelihood = [], []
