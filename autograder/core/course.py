@@ -54,8 +54,14 @@ def check_assignment(assignment: str) -> None:
 def stub_owner(names: set[str], exclude: str) -> str | None:
     """The assignment other than ``exclude`` with the most stubs among ``names`` (grading ids and names a
     notebook's code cells define), or None when no other assignment's stub is among them."""
-    counts = [(len(names & set(stub_names(other))), other) for other in assignment_ids()
-              if other != exclude and release_notebook(other).is_file()]  # a grading bundle may ship one assignment
+    counts = []
+    for other in assignment_ids():
+        if other == exclude or not release_notebook(other).is_file():  # a grading bundle may ship one assignment
+            continue
+        try:
+            counts.append((len(names & set(stub_names(other))), other))
+        except Exception:  # noqa: BLE001 - an assignment being written may not read yet: it is no one's answer
+            continue
     best = max(counts, default=(0, None))
     return best[1] if best[0] else None
 
