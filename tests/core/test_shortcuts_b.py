@@ -14,6 +14,7 @@ import pytest
 
 from autograder.authoring.samples import _with_stubs
 from autograder.core.grader import Grader
+from autograder.core.results import Reason
 
 pytestmark = pytest.mark.slow  # a few gradings: make test-fast leaves it out
 
@@ -77,6 +78,29 @@ def ipo_loss(pi_chosen, pi_rejected, ref_chosen, ref_rejected, beta):
     """(mean h - 1/(2 beta))^2, not the mean of the squares."""
     h = (pi_chosen - ref_chosen) - (pi_rejected - ref_rejected)
     return (h.mean() - 1 / (2 * beta)) ** 2
+''', "all"),
+    },
+    "hw7_verifier_rl": {
+        # the argument check and nothing else: k out of range raises, everything else is 0 [1/7 before: the test that
+        # k = 4 with n = [10, 4] does not raise looked at no value]
+        "pass_at_k": ('''
+def pass_at_k(n, c, k):
+    """Only the argument check; zeros otherwise."""
+    n = np.asarray(n)
+    if not 1 <= k <= n.min():
+        raise ValueError("k must be between 1 and n")
+    return np.zeros(np.broadcast(n, np.asarray(c)).shape)
+''', "all"),
+        # the raw reward as the advantage, whatever the kind: plain REINFORCE is unbiased too [1/7 before: the
+        # unbiasedness test]
+        "binary_group_advantages": ('''
+def binary_group_advantages(k, group, kind="grpo", eps=1e-4):
+    """1 for a pass, 0 for a fail: no baseline."""
+    if group < 2 or kind not in ("grpo", "dr_grpo", "rloo"):
+        raise ValueError("bad group or kind")
+    out = torch.zeros(len(k), 2, dtype=torch.float64)
+    out[:, 0] = 1.0
+    return out
 ''', "all"),
     },
 }
@@ -378,6 +402,8 @@ def test_shortcuts_lose_their_points(assignment, open_tmp):
     stubs = _grade(assignment, {name: source for name, (source, _) in cases.items()}, open_tmp / "shortcuts.ipynb")
     for name, (_, must_fail) in cases.items():
         passed = [t.name for t in stubs[name].tests if t.passed]
+        assert any(t.reason == Reason.WRONG for t in stubs[name].tests), \
+            f"{assignment}: the shortcut for {name} did not run to a wrong answer (a typo in the case?)"
         if must_fail == "all":
             assert not passed, f"{assignment}: the shortcut for {name} passed {passed}"
         else:

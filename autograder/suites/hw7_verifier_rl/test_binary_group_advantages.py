@@ -86,6 +86,12 @@ def test_rloo_is_unbiased_on_a_coin(student):
     for g, p in ((4, 0.2), (8, 0.65)):
         k = np.arange(g + 1)
         table = as_array(_call(student, k, g, "rloo"), "the RLOO table")
+        # Unbiasedness alone passes no baseline at all (the raw reward, 1 for a pass and 0 for a fail, is plain
+        # REINFORCE): leave-one-out advantages also sum to zero over each group.
+        assert table.shape == (g + 1, 2), f"the RLOO table has shape {table.shape}, expected {(g + 1, 2)}"
+        assert np.allclose(k * table[:, 0] + (g - k) * table[:, 1], 0, atol=1e-6), \
+            f"G = {g}: a group's leave-one-out advantages (k passes, G - k fails) should sum to zero; these do not: " \
+            "is a baseline subtracted at all?"
         w = np.array([comb(g, int(x)) * p ** x * (1 - p) ** (g - x) for x in k])
         # d log pi / d theta is (1 - p) for a pass and -p for a fail; the update averages over the G samples
         update = (w * (k * table[:, 0] * (1 - p) + (g - k) * table[:, 1] * (-p)) / g).sum()

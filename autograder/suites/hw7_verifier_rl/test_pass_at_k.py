@@ -82,3 +82,6 @@ def test_bad_k_raises(student):
         assert outcome == "ValueError", f"k = {k} with n = {n.tolist()} should raise ValueError, got {outcome}"
     outcome = raised(student.pass_at_k, np.array([10, 4]), np.array([3, 1]), 4)  # a stub that always raises earns nothing
     assert outcome == "no error", f"k = 4 with n = [10, 4] is allowed (1 <= k <= n), but it raised {outcome}"
+    got = _array(student.pass_at_k(np.array([10, 4]), np.array([3, 1]), 4), (2,))  # nor one that checks k and no more
+    assert np.allclose(got, [_exact(10, 3, 4), 1.0], rtol=1e-9, atol=1e-12), \
+        "k = 4 with n = [10, 4], c = [3, 1]: the estimates are wrong (the second has n - c < k: exactly 1)"
