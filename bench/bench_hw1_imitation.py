@@ -65,9 +65,9 @@ labels every state with the expert's clean action (``rlcourse.drift.dart_run``).
   it shows is reported, and the notebook and lecture 1 say what it means.
 - Fractions are of the recorded expert return (the denominator of the BC and DAgger columns). Added after
   the first start, before any DART result: the re-measured expert return is 2,681.4, not the recorded
-  2,667.9. Rollouts now differ from the drift runs' in the last digits of floating point (other library
-  builds on this machine), and Hopper's chaotic contacts amplify that to whole episodes (one of the 20
-  went from 2,309 to 2,587). So the run stops if the two differ by more than 2%, and the refitted clone
+  2,667.9. Rollouts now differ from the drift runs' in the last digits of floating point (the world's and
+  the expert's code are unchanged; the Python environment was reinstalled on 2026-12-04, after those runs),
+  and Hopper's contacts amplify that to whole episodes (one of the 20 went from 2,309 to 2,587). So the run stops if the two differ by more than 2%, and the refitted clone
   is not a copy of the recorded one but a second draw of the same-labels clone, trained and evaluated
   beside DART: compare DART with both.
 """
