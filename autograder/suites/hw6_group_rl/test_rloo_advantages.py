@@ -61,3 +61,6 @@ def test_unbiased_by_enumeration(student, rng):
     assert np.allclose(expected, true, rtol=1e-6, atol=1e-12), \
         "the expected gradient has the right direction but the wrong scale: a biased baseline (the group mean " \
         "includes r_i and shrinks it by (G - 1) / G)"
+    # Unbiased and zero-sum still passes other baselines (the next reward of the group, say): the values too.
+    expect_close(torch.as_tensor(adv), _rloo(r[all_groups]),
+                 "the advantages of every group (unbiased, but is the baseline the mean of ALL the other rewards?)")
