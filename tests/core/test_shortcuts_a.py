@@ -201,3 +201,41 @@ def test_select_queries_accepts_either_order_of_equal_variances():
     for wrong in ([1, 4, 2], [1, 2, 0], [1, 1, 4]):
         with pytest.raises(AssertionError):
             _check_selection(np.array(wrong), var, 3, "the selection")
+
+
+def _suite_module(assignment: str, name: str):
+    """The suite file ``name`` of ``assignment``, imported with its own folder first on the path (and its own
+    ``conftest``, put back afterwards)."""
+    import importlib
+
+    folder = str(course.suite_dir(assignment))
+    saved = {k: sys.modules.pop(k) for k in ("conftest", name) if k in sys.modules}
+    sys.path.insert(0, folder)
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(folder)
+        for k in ("conftest", name):
+            sys.modules.pop(k, None)
+        sys.modules.update(saved)
+
+
+class _CorrectModeCoverage:
+    """A student namespace whose mode_coverage is right, raising ValueError for an expert that never passed."""
+
+    @staticmethod
+    def mode_coverage(sides, expert_sides):
+        sides, expert_sides = np.asarray(sides), np.asarray(expert_sides)
+        q_left, q_right = np.mean(expert_sides == 1), np.mean(expert_sides == -1)
+        if q_left + q_right == 0:
+            raise ValueError("the expert never passed")
+        p_left, p_right = np.mean(sides == 1), np.mean(sides == -1)
+        return {"left": float(p_left), "right": float(p_right), "not_passed": float(np.mean(sides == 0)),
+                "coverage": float((min(p_left, q_left) + min(p_right, q_right)) / (q_left + q_right))}
+
+
+def test_mode_coverage_random_labels_never_draw_an_expert_that_never_passed():
+    """hw1b: seed 1575 of the test's generator draws, in its first round, an expert whose episodes all failed to pass
+    (about 1 draw in 2,000), where a correct stub must raise; the test hands over a passing episode instead."""
+    suite = _suite_module("hw1b_multimodal", "test_mode_coverage")
+    suite.test_fractions_and_coverage_on_random_labels(_CorrectModeCoverage(), np.random.default_rng(1575))
