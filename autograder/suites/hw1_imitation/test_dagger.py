@@ -1,6 +1,7 @@
 """Hidden tests of hw1's `dagger`, on the race track, checked against rollouts computed on the grader's side.
 
-The student's `dagger` runs beside its own `train_bc` (a network cannot cross to the reference's), so most
+The student's `dagger` runs beside its own `train_bc` (a network cannot cross to the reference's; the library's
+density stands in for its `bc_loss`, ``sandbox_helpers._bc_loss_stands_in``), so most
 checks judge what training does not change (the untrained learner's rollouts, the expert's at beta = 1, the
 labels); reproducibility and the final learner also depend on `train_bc`. Every rollout that a check relies on is recomputed here, with the
 trusted environment, the trusted expert and a trusted copy of the learner's weights.
