@@ -18,6 +18,11 @@ left as released, so it raises) and checks the score of each: "zero" for a short
 - hw2 ``deep_maxent_irl`` with its layers built in float64 (``nn.Linear(..., dtype=torch.float64)``, which draws other
   initial weights under the same seed than float32 layers): 3/5, refused by the two tests that compare with the
   reference's initial network; the docstring leaves the dtype open, and either network is accepted now.
+- hw1 ``train_bc`` correct beside a wrong ``bc_loss`` (a sum for the mean): 6/8, and 0/8 beside a missing one (the
+  reference cannot stand in for a function of a network, so the student's own bc_loss ran); the library's density
+  stands in for it now, in train_bc's and dagger's tests.
+- hw3 ``train_reward_model`` and ``select_queries`` correct beside a missing ``segment_return`` and
+  ``preference_loss``: 0/6 and 0/4 (the same reason); the docstrings' one-liners stand in for those two now.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -144,7 +149,10 @@ def discounted_returns(rewards, gamma):
     return out
 '''
 
-SOLVED = {a: solution_sources(a) for a in ("hw2_maxent_irl", "hw3_preferences")}
+SOLVED = {a: solution_sources(a) for a in ("hw1_imitation", "hw2_maxent_irl", "hw3_preferences")}
+MEAN = "return neg_log_density.sum(dim=-1).mean()"
+assert MEAN in SOLVED["hw1_imitation"]["bc_loss"], "the reference bc_loss's last line has moved"
+HW1_BC_LOSS_SUMMED = SOLVED["hw1_imitation"]["bc_loss"].replace(MEAN, "return neg_log_density.sum()")
 POPULATION = "features[states].sum(axis=1).var(axis=0)"
 assert POPULATION in SOLVED["hw2_maxent_irl"]["maxent_irl"], "the reference maxent_irl's step scale has moved"
 # Allowed: "the variance over the demonstrations" read as the sample variance (ddof = 1)
@@ -153,6 +161,9 @@ HW2_SAMPLE_VARIANCE = SOLVED["hw2_maxent_irl"]["maxent_irl"].replace(POPULATION,
 # (assignment, the stubs written, the score each must get: "zero" or "full")
 CASES = [
     ("hw0_setup", {"discounted_returns": HW0_FLOAT32}, {"discounted_returns": "full"}),
+    # a correct train_bc beside a wrong bc_loss (a sum for the mean): the mistake costs bc_loss alone
+    ("hw1_imitation", {"train_bc": SOLVED["hw1_imitation"]["train_bc"], "bc_loss": HW1_BC_LOSS_SUMMED},
+     {"train_bc": "full", "bc_loss": "zero"}),
     ("hw2_maxent_irl", HW2_SHORTCUTS, {"maxent_irl": "zero", "deep_maxent_irl": "zero"}),
     ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED, "maxent_irl": HW2_SAMPLE_VARIANCE},
      {"deep_maxent_irl": "full", "maxent_irl": "full"}),
@@ -164,6 +175,10 @@ CASES = [
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_SCIPY, "bt_loss": SOLVED["hw3_preferences"]["bt_loss"],
                          "select_queries": HW3_SELECT_TOPK},
      {"fit_bradley_terry": "zero", "select_queries": "full"}),
+    # correct stubs beside missing ones they call with networks (which the grader's reference cannot take)
+    ("hw3_preferences", {"train_reward_model": SOLVED["hw3_preferences"]["train_reward_model"],
+                         "select_queries": SOLVED["hw3_preferences"]["select_queries"]},
+     {"train_reward_model": "full", "select_queries": "full"}),
 ]
 
 

@@ -183,7 +183,7 @@ def _held_out(ensemble, data, n_members):
 
 def _train(student, data, n_labels, n_members, seed, n_steps, **kwargs):
     """The grader's copy of the ensemble the student's train_reward_model returns."""
-    handle = student.train_reward_model(data["obs"], data["act"], data["pairs"][:n_labels], data["mu"][:n_labels],
+    handle = student.helpers.run_train_reward_model(data["obs"], data["act"], data["pairs"][:n_labels], data["mu"][:n_labels],
                                         n_members=n_members, n_steps=n_steps, seed=seed, timeout=120, **kwargs)
     return _trusted(student, handle, n_members)
 
@@ -213,7 +213,7 @@ def test_learns_the_right_direction(student):
     # standard deviations.
     data = _synthetic(1)
     pairs, mu, settings = data["pairs"][:400], data["mu"][:400], {"n_members": 1, "n_steps": 20, "lr": 1e-2, "seed": 1}
-    forward, backward = (_trusted(student, student.train_reward_model(data["obs"], data["act"], p, m, timeout=120,
+    forward, backward = (_trusted(student, student.helpers.run_train_reward_model(data["obs"], data["act"], p, m, timeout=120,
                                                                       **settings), 1)
                          for p, m in ((pairs, mu), (np.ascontiguousarray(pairs[:, ::-1]), 1.0 - mu)))
     got = _predict(forward, data["test_obs"], data["test_act"], 1)
@@ -232,7 +232,7 @@ def test_members_normalised_and_distinct(student):
     """Three members, each normalised to mean 0 and std 1 per step on the segments used, and no two alike"""
     data = _synthetic(0)
     pairs = data["pairs"][200:500]
-    ens = _trusted(student, student.train_reward_model(data["obs"], data["act"], pairs, data["mu"][200:500], n_members=3,
+    ens = _trusted(student, student.helpers.run_train_reward_model(data["obs"], data["act"], pairs, data["mu"][200:500], n_members=3,
                                                        n_steps=15, lr=1e-2, seed=2, timeout=120), 3)
     used = np.unique(pairs)
     rewards = _predict(ens, data["obs"][used], data["act"][used], 3)
@@ -265,7 +265,7 @@ def test_members_train_on_different_bootstraps(student):
     obs = torch.as_tensor(rng.normal(size=(2 * n_pairs, length, OBS_DIM)), dtype=torch.float32)
     act = torch.as_tensor(rng.uniform(-1, 1, size=(2 * n_pairs, length, ACT_DIM)), dtype=torch.float32)
     pairs, mu = np.arange(2 * n_pairs).reshape(n_pairs, 2), rng.integers(0, 2, n_pairs).astype(float)
-    ens = _trusted(student, student.train_reward_model(obs, act, pairs, mu, n_members=3, n_steps=60, lr=1e-2,
+    ens = _trusted(student, student.helpers.run_train_reward_model(obs, act, pairs, mu, n_members=3, n_steps=60, lr=1e-2,
                                                        weight_decay=0.0, seed=4, timeout=120), 3)
     returns = _predict(ens, obs, act, 3).sum(-1)                                  # (3, 2 * n_pairs)
     fit = (2 * mu - 1) * (returns[:, 0::2] - returns[:, 1::2])                   # > 0: the member agrees with the label

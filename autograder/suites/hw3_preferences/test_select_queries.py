@@ -50,7 +50,8 @@ def _check_selection(got, var, k, what):
 
 
 def _selected(student, seed, obs, act, cand, k):
-    return student.select_queries(student.helpers.build(ENSEMBLE, 11, 3, n_members=5, seed=seed), obs, act, cand, k)
+    return student.helpers.run_select_queries(student.helpers.build(ENSEMBLE, 11, 3, n_members=5, seed=seed), obs, act,
+                                              cand, k)
 
 
 @stub("select_queries", points=2, hint=HINT)
