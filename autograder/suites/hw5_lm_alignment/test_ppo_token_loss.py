@@ -70,6 +70,7 @@ def test_ragged_batch_matches_reference(student, reference, rng):
     """Random batch with ragged masks and extreme values on masked tokens: a token-level masked mean"""
     b, t = 4, 7
     mask = (np.arange(t)[None] >= rng.integers(1, 3, size=(b, 1))) & (np.arange(t)[None] < rng.integers(3, 8, size=(b, 1)))
+    mask[0], mask[1] = np.arange(t) >= 1, np.arange(t) == 2   # rows of 6 and 1 tokens: a mean per sequence differs
     kw = {k: torch.as_tensor(rng.normal(scale=0.3, size=(b, t))) for k in ("lp", "lp_old", "adv", "v", "ret")}
     for k in kw:
         kw[k][~torch.as_tensor(mask)] = 1e3 * (1 if k != "lp" else -1)   # junk where masked

@@ -25,6 +25,8 @@ def _inputs(rng, n=12):
     pi = ref + rng.normal(scale=2, size=n)
     des = rng.random(n) < 0.5
     des[:2] = [True, False]
+    if 2 * des.sum() == n:   # never as many desirable as undesirable: a mean per kind would then equal the mean
+        des[2] = not des[2]
     return pi, ref, des, float(rng.uniform(0.1, 1.5))
 
 

@@ -12,6 +12,7 @@ def _case(rng, b=5, t=7):
     lp = -rng.exponential(size=(b, t))
     mask = (rng.random((b, t)) < 0.5).astype(float)
     mask[np.arange(b), rng.integers(t, size=b)] = 1.0
+    mask[0], mask[1] = 1.0, np.eye(t)[rng.integers(t)]   # rows of t tokens and of 1: a mean per row differs
     return lp, mask
 
 
