@@ -129,6 +129,20 @@ def rft_loss(logp, mask):
     keep = mask > 0
     return (-torch.where(keep, logp, torch.zeros_like(logp)).sum(1) / keep.sum(1)).mean()
 ''', "all"),
+        # passing rows up to the cap, no duplicate check: a draw without a passing duplicate could not tell (3/4 on
+        # two of four draws before); every draw has one now
+        "rft_select": ('''
+def rft_select(tokens, correct, group, max_per_prompt):
+    """The first passing rows of each group, duplicates kept."""
+    keep, ok = [], [bool(x) for x in torch.as_tensor(correct).tolist()]
+    for g in range(len(tokens) // group):
+        kept = 0
+        for i in range(g * group, (g + 1) * group):
+            if ok[i] and kept < max_per_prompt:
+                keep.append(i)
+                kept += 1
+    return torch.as_tensor(keep, dtype=torch.int64)
+''', "all"),
     },
 }
 
@@ -339,15 +353,19 @@ def rft_loss(logp, mask):
 ''',
         "rft_select": '''
 def rft_select(tokens, correct, group, max_per_prompt):
-    """A set of row tuples per group."""
+    """Skips every row seen before in its group, passing or not: the docstring's rule whenever identical rows get the
+    same verdict, as a checker's do [4/4 on 8 of 10 draws before, when verdicts were drawn row by row]."""
     keep, ok = [], [bool(x) for x in torch.as_tensor(correct).tolist()]
     for g in range(len(tokens) // group):
-        seen = set()
+        seen, kept = set(), 0
         for i in range(g * group, (g + 1) * group):
             key = tuple(tokens[i].tolist())
-            if ok[i] and key not in seen and len(seen) < max_per_prompt:
-                seen.add(key)
+            if key in seen:
+                continue
+            seen.add(key)
+            if ok[i] and kept < max_per_prompt:
                 keep.append(i)
+                kept += 1
     return torch.as_tensor(keep, dtype=torch.int64)
 ''',
         "binary_group_advantages": '''
