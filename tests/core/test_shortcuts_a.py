@@ -23,6 +23,8 @@ left as released, so it raises) and checks the score of each: "zero" for a short
   stands in for it now, in train_bc's and dagger's tests.
 - hw3 ``train_reward_model`` and ``select_queries`` correct beside a missing ``segment_return`` and
   ``preference_loss``: 0/6 and 0/4 (the same reason); the docstrings' one-liners stand in for those two now.
+- hw2 ``fit_route_weights`` correct beside a missing ``route_log_partition``: 0/3 (called with weights that need
+  gradients); the reference's log-partition, lent by the grader as values and vector-Jacobian products, stands in now.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -153,6 +155,17 @@ SOLVED = {a: solution_sources(a) for a in ("hw1_imitation", "hw2_maxent_irl", "h
 MEAN = "return neg_log_density.sum(dim=-1).mean()"
 assert MEAN in SOLVED["hw1_imitation"]["bc_loss"], "the reference bc_loss's last line has moved"
 HW1_BC_LOSS_SUMMED = SOLVED["hw1_imitation"]["bc_loss"].replace(MEAN, "return neg_log_density.sum()")
+FIT_HEAD = "def fit_route_weights("
+assert SOLVED["hw2_maxent_irl"]["fit_route_weights"].startswith(FIT_HEAD), "the reference fit_route_weights has moved"
+# A shortcut: fit_route_weights keeps the reference log-partition it is lent, and route_log_partition (tested after
+# it) answers with it; the lent stand-in refuses calls once its fit has returned.
+HW2_KEEP_THE_STAND_IN = {
+    "fit_route_weights": "_KEPT = []\n\n" + SOLVED["hw2_maxent_irl"]["fit_route_weights"].replace(
+        '    """Maximum-likelihood', '    _KEPT.append(route_log_partition)\n    """Maximum-likelihood', 1),
+    "route_log_partition": ("def route_log_partition(weights, net, origins, destinations, horizon):\n"
+                            "    return _KEPT[-1](weights, net, origins, destinations, horizon)\n"),
+}
+assert "_KEPT.append" in HW2_KEEP_THE_STAND_IN["fit_route_weights"]
 POPULATION = "features[states].sum(axis=1).var(axis=0)"
 assert POPULATION in SOLVED["hw2_maxent_irl"]["maxent_irl"], "the reference maxent_irl's step scale has moved"
 # Allowed: "the variance over the demonstrations" read as the sample variance (ddof = 1)
@@ -165,8 +178,11 @@ CASES = [
     ("hw1_imitation", {"train_bc": SOLVED["hw1_imitation"]["train_bc"], "bc_loss": HW1_BC_LOSS_SUMMED},
      {"train_bc": "full", "bc_loss": "zero"}),
     ("hw2_maxent_irl", HW2_SHORTCUTS, {"maxent_irl": "zero", "deep_maxent_irl": "zero"}),
-    ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED, "maxent_irl": HW2_SAMPLE_VARIANCE},
-     {"deep_maxent_irl": "full", "maxent_irl": "full"}),
+    ("hw2_maxent_irl", HW2_KEEP_THE_STAND_IN, {"route_log_partition": "zero", "fit_route_weights": "full"}),
+    # and a correct fit_route_weights beside a missing route_log_partition
+    ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED, "maxent_irl": HW2_SAMPLE_VARIANCE,
+                        "fit_route_weights": SOLVED["hw2_maxent_irl"]["fit_route_weights"]},
+     {"deep_maxent_irl": "full", "maxent_irl": "full", "fit_route_weights": "full"}),
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_MM,
                          "fit_bradley_terry_mm": SOLVED["hw3_preferences"]["fit_bradley_terry_mm"],
                          "select_queries": HW3_SELECT_REVERSED, "ratings_to_comparisons": HW3_RATINGS_LOOP},

@@ -2,7 +2,7 @@
 import numpy as np
 import torch
 
-from autograder.suite import stub
+from autograder.suite import lend, stub
 from rlcourse.roads import load_network, load_routes
 
 HINT = ("mu_D = mean route features; maximise w . mu_D - mean(route_log_partition(w, ...)) from w = 0 with "
@@ -43,8 +43,45 @@ def _magnitude(x):
     return "less than 0.01" if x < 0.01 else f"of the order of {10.0 ** np.floor(np.log10(x)):g}"
 
 
-def _call(client, net, feats, origins, destinations, horizon, n_iters=60):
-    return client.fit_route_weights(_network(client, net), feats, origins, destinations, horizon, n_iters=n_iters)
+class _ReferenceLogPartition:
+    """The reference's route_log_partition on ``net``, lent to the sandbox while the student's fit_route_weights runs:
+    log Z of a query, and its vector-Jacobian product in the weights (plain data both ways). The grader's automatic
+    stand-ins take plain data only, and the fit calls route_log_partition with weights that need gradients, so
+    without this the student's own ran (a correct fit beside a missing route_log_partition scored 0/3)."""
+
+    def __init__(self, reference, net) -> None:
+        self.reference, self.network, self.closed = reference, _network(reference, net), False
+
+    def _open(self) -> None:
+        """A lent object stays registered after its test: one kept by the submission must not answer later tests
+        (route_log_partition's, on the same shipped network)."""
+        if self.closed:
+            raise RuntimeError("this stand-in served one call of fit_route_weights and is closed")
+
+    def log_z(self, w, origins, destinations, horizon):
+        self._open()
+        out = self.reference.route_log_partition(torch.tensor(np.asarray(w, dtype=float)), self.network, origins,
+                                                 destinations, horizon)
+        return out.detach().numpy()
+
+    def vjp(self, w, origins, destinations, horizon, grad_output):
+        self._open()
+        args = [torch.tensor(np.asarray(w, dtype=float)), self.network, origins, destinations, horizon]
+        _, (grad,) = self.reference.helpers.value_and_grad("route_log_partition", args, wrt=[0],
+                                                           grad_outputs=torch.as_tensor(grad_output))
+        return grad.numpy()
+
+
+def _call(client, net, feats, origins, destinations, horizon, n_iters=60, reference=None):
+    """``client``'s fit; for the student's (``reference`` given), with the reference's log-partition standing in."""
+    if reference is None:
+        return client.fit_route_weights(_network(client, net), feats, origins, destinations, horizon, n_iters=n_iters)
+    model = _ReferenceLogPartition(reference, net)
+    try:
+        return client.helpers.run_fit_route_weights(lend(model, methods=["log_z", "vjp"]), _network(client, net), feats,
+                                                    origins, destinations, horizon, n_iters=n_iters)
+    finally:
+        model.closed = True
 
 
 @stub("fit_route_weights", points=2, hint=HINT)
@@ -54,7 +91,7 @@ def test_reaches_the_maximum_likelihood(student, reference):
     # 0.43 s of CPU instead of 2.6), and the maximum is still one the optimiser must run to convergence to reach (the
     # reference stopped after 20 LBFGS iterations is 0.0019 below it, after 30 within 1e-5).
     net, feats, origins, destinations = _data(12, 12)
-    w, hist = _call(student, net, feats, origins, destinations, 12)
+    w, hist = _call(student, net, feats, origins, destinations, 12, reference=reference)
     w = np.asarray(w, dtype=float)
     assert w.shape == (7,), f"the weights should have shape (F,) = (7,), got {w.shape}"
     w_ref, _ = _call(reference, net, feats, origins, destinations, 12)
@@ -71,7 +108,7 @@ def test_history_rises(student, reference):
     """The recorded log-likelihood starts at its value at w = 0 and ends higher"""
     # A contract check, not a second fit to convergence: 5 trips of at most 12 segments, horizon 12, 4 iterations.
     net, feats, origins, destinations = _data(5, 12)
-    w, hist = _call(student, net, feats, origins, destinations, 12, n_iters=4)
+    w, hist = _call(student, net, feats, origins, destinations, 12, n_iters=4, reference=reference)
     hist = np.asarray(hist, dtype=float)
     assert hist.ndim == 1 and hist.size >= 2, f"the history should be a 1-D array of log-likelihoods, got shape {hist.shape}"
     at_zero, _ = _loglik_and_gradient(reference, net, np.zeros(feats.shape[1]), feats, origins, destinations, 12)
