@@ -25,6 +25,10 @@ left as released, so it raises) and checks the score of each: "zero" for a short
   ``preference_loss``: 0/6 and 0/4 (the same reason); the docstrings' one-liners stand in for those two now.
 - hw2 ``fit_route_weights`` correct beside a missing ``route_log_partition``: 0/3 (called with weights that need
   gradients); the reference's log-partition, lent by the grader as values and vector-Jacobian products, stands in now.
+- hw2b: a hard backup (max for log-sum-exp) in ``soft_policy``, the policy ignored in ``state_distributions`` (P
+  averaged over actions), and max(0, -l) for softplus(-l) in ``discriminator_loss``: 1/5, 1/4 and 1/6, each from the
+  one test where the shortcut and the formula agree (rewards spread over hundreds, a one-action cycle, logits of
+  +-1000); each of those tests now also checks a case where they differ.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -151,6 +155,67 @@ def discounted_returns(rewards, gamma):
     return out
 '''
 
+HW2B_HALF_WORK = {
+    'soft_policy': '''
+def soft_policy(P, reward, horizon):
+    """Hard value iteration, Boltzmann policy."""
+    S, A = P.shape[:2]; pi = np.zeros((horizon, S, A)); v = np.zeros(S)
+    for t in range(horizon - 1, -1, -1):
+        q = reward[t] + P @ v
+        z = q - q.max(1, keepdims=True); e = np.exp(z); pi[t] = e / e.sum(1, keepdims=True)
+        v = q.max(1)
+    return pi
+''',
+    'state_distributions': '''
+def state_distributions(P, policy, p0):
+    T = policy.shape[0]; d = [np.asarray(p0, float)]; M = P.mean(axis=1)
+    for t in range(T - 1):
+        d.append(d[-1] @ M)
+    return np.array(d)
+''',
+    'discriminator_loss': '''
+def discriminator_loss(expert_logits, policy_logits):
+    return torch.relu(-expert_logits).mean() + torch.relu(policy_logits).mean()
+''',
+}
+HW2B_ALLOWED = {
+    'soft_policy': '''
+def soft_policy(P, reward, horizon):
+    from scipy.special import logsumexp
+    S, A = P.shape[:2]
+    pi = np.zeros((horizon, S, A)); v = np.zeros(S)
+    for t in range(horizon - 1, -1, -1):
+        q = reward[t] + np.einsum("sab,b->sa", P, v)
+        v = logsumexp(q, axis=1)
+        pi[t] = np.exp(q - v[:, None])
+    return pi
+''',
+    'state_distributions': '''
+def state_distributions(P, policy, p0):
+    T = policy.shape[0]
+    d = [np.asarray(p0, dtype=float)]
+    for t in range(T - 1):
+        d.append(np.einsum("s,sa,sab->b", d[-1], policy[t], P))
+    return np.array(d)
+''',
+    'discriminator_loss': '''
+def discriminator_loss(expert_logits, policy_logits):
+    bce = torch.nn.functional.binary_cross_entropy_with_logits
+    return bce(expert_logits, torch.ones_like(expert_logits)) + bce(policy_logits, torch.zeros_like(policy_logits))
+''',
+    'airl_logits': '''
+def airl_logits(g, h, h_next, log_pi, gamma, done):
+    return g - h - log_pi + gamma * h_next * (1 - done)
+''',
+    'policy_reward': '''
+def policy_reward(logits, kind):
+    table = {"gail": lambda l: -F.logsigmoid(-l), "logd": F.logsigmoid, "airl": lambda l: l.clone()}
+    if kind not in table:
+        raise ValueError(kind)
+    return table[kind](logits)
+''',
+}
+
 SOLVED = {a: solution_sources(a) for a in ("hw1_imitation", "hw2_maxent_irl", "hw3_preferences")}
 MEAN = "return neg_log_density.sum(dim=-1).mean()"
 assert MEAN in SOLVED["hw1_imitation"]["bc_loss"], "the reference bc_loss's last line has moved"
@@ -177,6 +242,8 @@ CASES = [
     # a correct train_bc beside a wrong bc_loss (a sum for the mean): the mistake costs bc_loss alone
     ("hw1_imitation", {"train_bc": SOLVED["hw1_imitation"]["train_bc"], "bc_loss": HW1_BC_LOSS_SUMMED},
      {"train_bc": "full", "bc_loss": "zero"}),
+    ("hw2b_adversarial", HW2B_HALF_WORK, {k: "zero" for k in HW2B_HALF_WORK}),
+    ("hw2b_adversarial", HW2B_ALLOWED, {k: "full" for k in HW2B_ALLOWED}),
     ("hw2_maxent_irl", HW2_SHORTCUTS, {"maxent_irl": "zero", "deep_maxent_irl": "zero"}),
     ("hw2_maxent_irl", HW2_KEEP_THE_STAND_IN, {"route_log_partition": "zero", "fit_route_weights": "full"}),
     # and a correct fit_route_weights beside a missing route_log_partition

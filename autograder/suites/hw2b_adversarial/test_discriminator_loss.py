@@ -40,6 +40,12 @@ def test_large_logits(student):
     wrong = scalar(student.discriminator_loss(-big, big), "the loss of a confident, wrong discriminator")
     assert abs(right) < 1e-9, "a discriminator sure and right on every sample should cost (almost) nothing"
     assert abs(wrong - 2000.0) < 1e-6, "a discriminator sure and wrong costs about |l| per side: 1000 + 1000"
+    # beside an undecided sample on each side (D = 1/2, log 2 each): max(0, -l) for softplus(-l) gave 0 here
+    zero = torch.zeros(1, dtype=torch.float64)
+    mixed = scalar(student.discriminator_loss(torch.cat([big[:1], zero]), torch.cat([-big[:1], zero])),
+                   "the loss of a discriminator sure and right on one sample and undecided on another, on each side")
+    assert abs(mixed - np.log(2)) < 1e-9, ("one sure-and-right and one undecided sample per side cost (0 + log 2) / 2 "
+                                           "per side, log 2 in all: softplus(-l) = log(1 + exp(-l)), not max(0, -l)")
 
 
 @stub("discriminator_loss", points=1, hint="At the optimal discriminator the loss is 2 log 2 - 2 JS(expert, policy).")

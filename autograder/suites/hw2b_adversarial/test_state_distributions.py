@@ -36,13 +36,16 @@ def test_step_by_step_by_hand(student, rng):
 
 @stub("state_distributions", points=1, hint="A horizon of T gives T distributions, s_0 .. s_{T-1}: d[0] is p0.")
 def test_one_step_and_a_cycle(student, rng):
-    """T = 1 gives p0 alone; a deterministic cycle moves the mass one state per step"""
+    """T = 1 gives p0 alone; a policy that always moves on round a cycle moves the mass one state per step"""
     P = _mdp(rng, 4, 2)
     p0 = rng.dirichlet(np.ones(4))
     check_array(student.state_distributions(P, np.full((1, 4, 2), 0.5), p0), p0[None], rtol=1e-12, atol=1e-15,
                 name="the distributions for T = 1")
-    cycle = np.zeros((4, 1, 4))
+    cycle = np.zeros((4, 2, 4))                         # action 0 moves on round the cycle, action 1 stays put
     cycle[np.arange(4), 0, (np.arange(4) + 1) % 4] = 1.0
-    got = student.state_distributions(cycle, np.ones((5, 4, 1)), p0)
+    cycle[np.arange(4), 1, np.arange(4)] = 1.0
+    always_move = np.zeros((5, 4, 2))
+    always_move[..., 0] = 1.0                           # a policy that never stays: the policy decides, not P alone
+    got = student.state_distributions(cycle, always_move, p0)
     check_array(got, np.stack([np.roll(p0, t) for t in range(5)]), rtol=1e-12, atol=1e-15,
-                name="the distributions on a deterministic cycle")
+                name="the distributions on a deterministic cycle, under a policy that always moves on")
