@@ -288,7 +288,9 @@ def rloo_advantages(rewards):
 ''',
         "grpo_token_loss": '''
 def grpo_token_loss(logp, logp_old, logp_ref, advantages, mask, clip_eps=0.2, beta=0.04, length_norm=True):
-    """Row by row with boolean indexing."""
+    """Row by row with boolean indexing, in float32 (the docstring fixes no dtype) [9/11 on 4 of 8 redraws before:
+    the k3 gradient compared at rtol 1e-6]."""
+    logp, logp_old, logp_ref, advantages = (x.float() for x in (logp, logp_old, logp_ref, advantages))
     rows, total = [], 0.0
     for b in range(logp.shape[0]):
         k = mask[b].bool()
@@ -309,8 +311,8 @@ def ipo_loss(pi_chosen, pi_rejected, ref_chosen, ref_rejected, beta):
 ''',
         "kto_loss": '''
 def kto_loss(pi, ref, desirable, kl_ref, beta, w_desirable=1.0, w_undesirable=1.0):
-    """z0 as a float, the two kinds summed apart."""
-    z0, r, d = float(kl_ref), pi - ref, desirable.bool()
+    """z0 as a float, the two kinds summed apart, in float32 [4/6 on a redraw before: rtol 1e-6]."""
+    z0, r, d = float(kl_ref), pi.float() - ref.float(), desirable.bool()
     loss_d = w_desirable * (1 - torch.sigmoid(beta * (r[d] - z0)))
     loss_u = w_undesirable * (1 - torch.sigmoid(beta * (z0 - r[~d])))
     return (loss_d.sum() + loss_u.sum()) / len(r)

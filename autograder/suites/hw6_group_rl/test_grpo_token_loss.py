@@ -10,6 +10,10 @@ HINT = ("Per token: max(-ratio * A_b, -clip(ratio, 1 - eps, 1 + eps) * A_b) + be
         "then over rows; False: masked sum / (B * T).")
 
 
+# Losses and gradients are compared at rtol 1e-5: the docstring fixes no dtype, and the same loss computed in
+# float32 (the models are float32) is off by about 1e-6; every mistake in a formula is off by far more.
+
+
 def _args(lp, lp_old, lp_ref, adv, mask, eps, beta, norm):
     """The stub's arguments: positional, then keyword."""
     return [lp, lp_old, lp_ref, adv, mask], dict(clip_eps=eps, beta=beta, length_norm=norm)
@@ -87,10 +91,10 @@ def test_k3_penalty_value_and_gradient(student, rng):
               mask=torch.as_tensor(mask), eps=0.2, beta=beta, norm=True)
     got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     want = _numpy_loss(lp, lp, lp_ref, np.zeros(b), mask, 0.2, beta, True)
-    expect_close(torch.tensor(got), want, "the k3 penalty", rtol=1e-6)
+    expect_close(torch.tensor(got), want, "the k3 penalty", rtol=1e-5)
     grad = _grad(student, torch.as_tensor(lp), **kw)
     want_grad = beta * (1 - np.exp(lp_ref - lp)) * mask / mask.sum(1, keepdims=True) / b
-    expect_close(grad, want_grad, "d loss / d logp of the k3 penalty", rtol=1e-6, atol=1e-12)
+    expect_close(grad, want_grad, "d loss / d logp of the k3 penalty", rtol=1e-5, atol=1e-8)
 
 
 def _ragged(rng, b=4, t=7, junk=True):
@@ -117,7 +121,7 @@ def test_ragged_batch_grpo_normalisation(student, rng):
               mask=torch.as_tensor(mask), eps=0.2, beta=beta, norm=True)
     got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     expect_close(torch.tensor(got), _numpy_loss(lp, lp_old, lp_ref, adv, mask, 0.2, beta, True),
-                 "the loss with length_norm=True", rtol=1e-6)
+                 "the loss with length_norm=True", rtol=1e-5)
     grad = as_array(_grad(student, torch.as_tensor(lp), **kw), "the gradient")
     assert np.all(grad[mask == 0] == 0), "masked tokens must get exactly zero gradient"
 
@@ -131,7 +135,7 @@ def test_ragged_batch_dr_grpo_normalisation(student, rng):
               mask=torch.as_tensor(mask), eps=0.2, beta=beta, norm=False)
     got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     expect_close(torch.tensor(got), _numpy_loss(lp, lp_old, lp_ref, adv, mask, 0.2, beta, False),
-                 "the loss with length_norm=False", rtol=1e-6)
+                 "the loss with length_norm=False", rtol=1e-5)
 
 
 @stub("grpo_token_loss", points=1, hint="advantages[b] belongs to row b: broadcast it as advantages[:, None].")
@@ -144,4 +148,4 @@ def test_each_row_has_its_own_advantage(student, rng):
               mask=torch.as_tensor(mask), eps=0.2, beta=0.0, norm=True)
     got = scalar(_loss(student, torch.as_tensor(lp), **kw))
     expect_close(torch.tensor(got), _numpy_loss(lp, lp_old, lp_ref, adv, mask, 0.2, 0.0, True),
-                 "the loss of a square batch", rtol=1e-6)
+                 "the loss of a square batch", rtol=1e-5)

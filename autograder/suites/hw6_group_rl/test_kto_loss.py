@@ -9,6 +9,10 @@ HINT = ("r = pi - ref; desirable: w_d * sigmoid(beta (r - z0)), undesirable: w_u
         "the loss is the mean over ALL completions of (w - v), z0 detached.")
 
 
+# Losses and gradients are compared at rtol 1e-5: the docstring fixes no dtype, and the same loss computed in
+# float32 (the models are float32) is off by about 1e-6; every mistake in a formula is off by far more.
+
+
 def _sigmoid(x):
     return 1 / (1 + np.exp(-x))
 
@@ -37,9 +41,9 @@ def test_by_hand_with_weights(student, rng):
     beta, wd, wu = float(rng.uniform(0.1, 1.0)), float(rng.uniform(0.5, 1.5)), float(rng.uniform(1.5, 3.0))
     got = scalar(student.kto_loss(torch.as_tensor(pi), torch.as_tensor(ref), torch.as_tensor(des), z0, beta,
                                   w_desirable=wd, w_undesirable=wu))
-    expect_close(torch.tensor(got), _by_hand(pi, ref, des, z0, beta, wd, wu), "the loss", rtol=1e-6)
+    expect_close(torch.tensor(got), _by_hand(pi, ref, des, z0, beta, wd, wu), "the loss", rtol=1e-5)
     got = scalar(student.kto_loss(torch.as_tensor(pi), torch.as_tensor(ref), torch.as_tensor(des), z0, beta))
-    expect_close(torch.tensor(got), _by_hand(pi, ref, des, z0, beta, 1.0, 1.0), "the loss with default weights", rtol=1e-6)
+    expect_close(torch.tensor(got), _by_hand(pi, ref, des, z0, beta, 1.0, 1.0), "the loss with default weights", rtol=1e-5)
 
 
 @stub("kto_loss", points=2, hint="Treat z0 as a constant (detach it); d loss / d pi = -w beta s (1 - s) / N for a "
@@ -54,7 +58,7 @@ def test_gradient_and_detached_reference_point(student, rng):
     s = _sigmoid(beta * np.where(des, r - z0, z0 - r))
     w = np.where(des, 1.0, 2.0)
     want = np.where(des, -1.0, 1.0) * w * beta * s * (1 - s) / len(pi)
-    expect_close(grads[0], want, "d loss / d pi", rtol=1e-6, atol=1e-12)
+    expect_close(grads[0], want, "d loss / d pi", rtol=1e-5, atol=1e-9)
     assert grads[1] is None or float(torch.as_tensor(grads[1]).abs().sum()) == 0.0, \
         "gradient flowed into the reference point z0: detach it"
 
@@ -66,9 +70,9 @@ def test_at_the_reference(student, rng):
     wd, wu = float(rng.uniform(0.5, 1.5)), float(rng.uniform(1.5, 3.0))
     got = scalar(student.kto_loss(torch.as_tensor(ref), torch.as_tensor(ref), torch.as_tensor(des), 0.0, 0.5,
                                   w_desirable=wd, w_undesirable=wu))
-    expect_close(torch.tensor(got), float(np.mean(np.where(des, wd, wu)) / 2), "the loss at pi = ref, z0 = 0", rtol=1e-6)
+    expect_close(torch.tensor(got), float(np.mean(np.where(des, wd, wu)) / 2), "the loss at pi = ref, z0 = 0", rtol=1e-5)
     pi = ref + rng.normal(size=len(ref))
     a = scalar(student.kto_loss(torch.as_tensor(pi), torch.as_tensor(ref), torch.as_tensor(des), z0, 0.5))
     b = scalar(student.kto_loss(torch.as_tensor(pi), torch.as_tensor(ref), torch.as_tensor(des), torch.tensor(z0), 0.5))
-    assert np.isclose(a, b, rtol=1e-6), "z0 given as a float and as a 0-dim tensor should give the same loss"
-    expect_close(torch.tensor(a), _by_hand(pi, ref, des, z0, 0.5, 1.0, 1.0), "the loss", rtol=1e-6)
+    assert np.isclose(a, b, rtol=1e-5), "z0 given as a float and as a 0-dim tensor should give the same loss"
+    expect_close(torch.tensor(a), _by_hand(pi, ref, des, z0, 0.5, 1.0, 1.0), "the loss", rtol=1e-5)
