@@ -29,6 +29,8 @@ left as released, so it raises) and checks the score of each: "zero" for a short
   averaged over actions), and max(0, -l) for softplus(-l) in ``discriminator_loss``: 1/5, 1/4 and 1/6, each from the
   one test where the shortcut and the formula agree (rewards spread over hundreds, a one-action cycle, logits of
   +-1000); each of those tests now also checks a case where they differ.
+- hw3 ``bt_gradient`` as central finite differences of ``bt_loss`` (no derivative worked out): 2/3, from the test
+  that compared with finite differences at 1e-4; both tests now compare with the closed form at 1e-11.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -80,6 +82,21 @@ def fit_bradley_terry(n_items, i, j, mu, lr=None, n_steps=5000, tol=1e-9):
     res = minimize(lambda u: bt_loss(u, i, j, mu), np.zeros(n_items), jac=lambda u: bt_gradient(u, i, j, mu),
                    method="BFGS", options={"gtol": 1e-12, "maxiter": 10000})
     return res.x - res.x.mean()
+'''
+HW3_GRADIENT_BY_DIFFERENCES = '''
+def bt_gradient(utilities, i, j, mu):
+    """No derivation: central finite differences of bt_loss."""
+    u, eps = np.asarray(utilities, dtype=float), 1e-6
+    return np.array([(bt_loss(u + eps * e, i, j, mu) - bt_loss(u - eps * e, i, j, mu)) / (2 * eps) for e in np.eye(len(u))])
+'''
+HW3_GRADIENT_BY_AUTOGRAD = '''
+def bt_gradient(utilities, i, j, mu):
+    """Allowed: autograd through the loss written in torch (exact to rounding)."""
+    u = torch.tensor(np.asarray(utilities, dtype=float), requires_grad=True)
+    d = u[torch.as_tensor(i)] - u[torch.as_tensor(j)]
+    m = torch.as_tensor(np.asarray(mu, dtype=float))
+    (-(m * torch.nn.functional.logsigmoid(d) + (1 - m) * torch.nn.functional.logsigmoid(-d)).mean()).backward()
+    return u.grad.numpy()
 '''
 HW3_SELECT_REVERSED = '''
 def select_queries(ensemble, obs, act, candidates, k):
@@ -252,12 +269,13 @@ CASES = [
      {"deep_maxent_irl": "full", "maxent_irl": "full", "fit_route_weights": "full"}),
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_MM,
                          "fit_bradley_terry_mm": SOLVED["hw3_preferences"]["fit_bradley_terry_mm"],
-                         "select_queries": HW3_SELECT_REVERSED, "ratings_to_comparisons": HW3_RATINGS_LOOP},
+                         "select_queries": HW3_SELECT_REVERSED, "ratings_to_comparisons": HW3_RATINGS_LOOP,
+                         "bt_gradient": HW3_GRADIENT_BY_AUTOGRAD},
      {"fit_bradley_terry": "zero", "fit_bradley_terry_mm": "full", "select_queries": "full",
-      "ratings_to_comparisons": "full"}),
+      "ratings_to_comparisons": "full", "bt_gradient": "full"}),
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_SCIPY, "bt_loss": SOLVED["hw3_preferences"]["bt_loss"],
-                         "select_queries": HW3_SELECT_TOPK},
-     {"fit_bradley_terry": "zero", "select_queries": "full"}),
+                         "select_queries": HW3_SELECT_TOPK, "bt_gradient": HW3_GRADIENT_BY_DIFFERENCES},
+     {"fit_bradley_terry": "zero", "select_queries": "full", "bt_gradient": "zero"}),
     # correct stubs beside missing ones they call with networks (which the grader's reference cannot take)
     ("hw3_preferences", {"train_reward_model": SOLVED["hw3_preferences"]["train_reward_model"],
                          "select_queries": SOLVED["hw3_preferences"]["select_queries"]},
