@@ -350,8 +350,8 @@ def pass_at_k(n, c, k):
 ''',
         "rft_loss": '''
 def rft_loss(logp, mask):
-    """Boolean indexing."""
-    return -logp[mask > 0].mean()
+    """Boolean indexing, in float32 (the docstring fixes no dtype)."""
+    return -logp.float()[mask > 0].mean()
 ''',
         "rft_select": '''
 def rft_select(tokens, correct, group, max_per_prompt):

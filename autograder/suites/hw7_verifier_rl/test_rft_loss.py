@@ -8,6 +8,10 @@ from conftest import as_array, expect_close, scalar
 HINT = "-(sum of logp over the masked entries) / (number of masked entries), masked-out entries selected away."
 
 
+# Compared at rtol 1e-6: the docstring fixes no dtype, and the same mean computed in float32 is off by about 1e-7;
+# a mean per row, a sum, or junk let through is off by far more.
+
+
 def _case(rng, b=5, t=7):
     lp = -rng.exponential(size=(b, t))
     mask = (rng.random((b, t)) < 0.5).astype(float)
@@ -22,10 +26,10 @@ def test_value_and_gradient_on_ragged_masks(student, rng):
     lp, mask = _case(rng)
     x, m = torch.as_tensor(lp), torch.as_tensor(mask)
     value = scalar(student.rft_loss(x, m))
-    assert np.isclose(value, -(lp * mask).sum() / mask.sum(), rtol=1e-9), \
+    assert np.isclose(value, -(lp * mask).sum() / mask.sum(), rtol=1e-6), \
         "the loss is not the mean of -logp over ALL masked tokens of the batch (per row first? the mask ignored?)"
     grad = student.helpers.grad("rft_loss", [x, m], {}, wrt=[0])[0]
-    expect_close(grad, -mask / mask.sum(), "d loss / d logp", rtol=1e-9, atol=1e-14)
+    expect_close(grad, -mask / mask.sum(), "d loss / d logp", rtol=1e-6, atol=1e-9)
 
 
 @stub("rft_loss", points=1, hint="Where mask is 0, logp may be -inf or NaN: torch.where(mask > 0, logp, 0), "
@@ -36,9 +40,9 @@ def test_masked_entries_may_be_anything(student, rng):
     dirty = np.where(mask > 0, lp, np.where(rng.random(lp.shape) < 0.5, -np.inf, np.nan))
     x, m = torch.as_tensor(dirty), torch.as_tensor(mask)
     value = scalar(student.rft_loss(x, m))
-    assert np.isclose(value, -(lp * mask).sum() / mask.sum(), rtol=1e-9), "the loss changed with the masked-out entries"
+    assert np.isclose(value, -(lp * mask).sum() / mask.sum(), rtol=1e-6), "the loss changed with the masked-out entries"
     grad = as_array(student.helpers.grad("rft_loss", [x, m], {}, wrt=[0])[0], "d loss / d logp")
-    assert np.allclose(grad, -mask / mask.sum(), rtol=1e-9, atol=1e-14), "the gradient changed with the masked-out entries"
+    assert np.allclose(grad, -mask / mask.sum(), rtol=1e-6, atol=1e-9), "the gradient changed with the masked-out entries"
 
 
 @stub("rft_loss", points=1, hint="A mean over tokens (not over rows, not a sum): doubling the batch leaves the loss unchanged.")
@@ -47,7 +51,7 @@ def test_a_token_mean_not_a_sum(student, rng):
     lp, mask = _case(rng, b=3, t=5)
     one = scalar(student.rft_loss(torch.as_tensor(lp), torch.as_tensor(mask)))
     two = scalar(student.rft_loss(torch.as_tensor(np.vstack([lp, lp])), torch.as_tensor(np.vstack([mask, mask]))))
-    assert np.isclose(one, two, rtol=1e-9), "the loss doubled with the batch: divide by the number of masked tokens"
-    assert np.isclose(one, -(lp * mask).sum() / mask.sum(), rtol=1e-9), "the loss is not the mean of -logp over the masked tokens"
+    assert np.isclose(one, two, rtol=1e-6), "the loss doubled with the batch: divide by the number of masked tokens"
+    assert np.isclose(one, -(lp * mask).sum() / mask.sum(), rtol=1e-6), "the loss is not the mean of -logp over the masked tokens"
     out = student.rft_loss(torch.as_tensor(lp).float(), torch.as_tensor(mask).float())
     assert type(out) is torch.Tensor and out.dtype == torch.float32, "float32 log-probabilities should give a float32 loss"
