@@ -2,10 +2,12 @@
 
 Each shortcut is a submission a lazy student might write: a function that has some of the right properties (the
 right sign, the right value at one point, a gradient consistent with its own value) without being the asked
-computation. Graded by the real grader, each must earn nothing on the stub it fakes (or, for a near miss that gets
-a case the docstring names wrong, lose the test that names it). The other way round, each allowed variant (another
-dtype, a loop for a vectorised form, torch ops in another order, another reduction the docstring leaves open) must
-earn full marks. One grading per assignment for the shortcuts, one for the variants.
+computation. Graded by the real grader, each must earn nothing on the stub it fakes (or, for a near miss: right
+values with part of the gradient detached, or one case the docstring names got wrong, lose the tests that check
+it). The other way round, each allowed variant (another dtype, a loop for a vectorised form, torch ops in another
+order, a rule that agrees with the docstring's on every input a checker gives) must earn full marks. One grading per
+assignment for the shortcuts, one for the variants; each case says what it scored before its suite was fixed (the
+commits that fixed them say on how many redraws, where the draw mattered).
 """
 from __future__ import annotations
 
@@ -297,9 +299,10 @@ def grpo_token_loss(logp, logp_old, logp_ref, advantages, mask, clip_eps=0.2, be
         lp, lo, lr = logp[b][k], logp_old[b][k], logp_ref[b][k]
         ratio = torch.exp(lp - lo)
         a = advantages[b]
-        l = torch.max(-ratio * a, -torch.clamp(ratio, 1 - clip_eps, 1 + clip_eps) * a) + beta * (torch.exp(lr - lp) - (lr - lp) - 1)
-        rows.append(l.mean())
-        total = total + l.sum()
+        surrogate = torch.max(-ratio * a, -torch.clamp(ratio, 1 - clip_eps, 1 + clip_eps) * a)
+        per_token = surrogate + beta * (torch.exp(lr - lp) - (lr - lp) - 1)
+        rows.append(per_token.mean())
+        total = total + per_token.sum()
     return torch.stack(rows).mean() if length_norm else total / (mask.shape[0] * mask.shape[1])
 ''',
         "ipo_loss": '''
@@ -457,7 +460,8 @@ def test_shortcuts_lose_their_points(assignment, open_tmp):
             titles = [t.name for t in stubs[name].tests]
             for start in must_fail:
                 assert any(t.startswith(start) for t in titles), f"{assignment}: no test of {name} is titled {start!r}"
-                assert not any(t.startswith(start) for t in passed), f"{assignment}: the near miss for {name} passed {start!r}"
+                assert not any(t.startswith(start) for t in passed), \
+                    f"{assignment}: the near miss for {name} passed {start!r}"
 
 
 @pytest.mark.parametrize("assignment", sorted(VARIANTS))
