@@ -44,7 +44,7 @@ def test_sums_to_horizon_and_starts_at_p0(student, reference, rng):
 
 @stub("state_visitation_frequency", points=1, hint=HINT)
 def test_agrees_with_monte_carlo(student, rng):
-    """Within 5 standard errors of 20,000 sampled trajectories"""
+    """Within 5 standard errors of 20,000 sampled trajectories, and exact for T = 2"""
     m = mdp(13)
     policy = _time_varying_policy(rng, 6, m)
     got = student.state_visitation_frequency(m.P, policy, m.p0, 6)
@@ -53,11 +53,17 @@ def test_agrees_with_monte_carlo(student, rng):
     mean, stderr = counts.mean(axis=0), counts.std(axis=0) / np.sqrt(len(counts)) + 1e-3
     worst = np.max(np.abs(np.asarray(got) - mean) / stderr)
     assert worst < 5, f"D differs from a Monte-Carlo estimate by {worst:.1f} standard errors at some state"
+    # ...and is exact where a hand computation is: a Monte-Carlo estimate itself (sample_trajectories is released)
+    # passed the comparison above alone, 1 of 5 points for no forward pass.
+    two = _time_varying_policy(rng, 2, m)
+    by_hand = m.p0 + np.einsum("s,sa,sab->b", m.p0, two[0], m.P)           # Pr(s_0 = s) + Pr(s_1 = s)
+    check_array(student.state_visitation_frequency(m.P, two, m.p0, 2), by_hand, rtol=1e-9, atol=1e-12,
+                name="D for T = 2 (p0 plus one step of the dynamics under pi_0: exact, not estimated)")
 
 
 @stub("state_visitation_frequency", points=1,
       hint="The analytic gradient mu_E - phi^T D must be the derivative of the expected log-likelihood: check "
-           "that D uses pi_t at step t and that soft_value_iteration is right.")
+           "that D uses pi_t at step t.")
 def test_gradient_matches_finite_difference(student, reference, rng):
     """mu_E - phi^T D(w) equals a central finite difference of the expected causal log-likelihood"""
     m = mdp(14, n_features=3)
@@ -66,12 +72,14 @@ def test_gradient_matches_finite_difference(student, reference, rng):
     occ = np.diff(np.array(svf), axis=0)                    # (T, S): Pr(s_t = s)
     mu_expert = m.features.T @ occ.sum(axis=0)
 
+    # The policies are the reference's soft_value_iteration's: with the student's, a correct forward pass beside a
+    # missing or wrong backward pass lost this point too.
     def loglik(w):
-        log_pi = np.log(student.soft_value_iteration(m.P, m.features @ w, m.horizon))
+        log_pi = np.log(reference.soft_value_iteration(m.P, m.features @ w, m.horizon))
         return float(np.sum(occ[:, :, None] * expert * log_pi))
 
     w = rng.normal(size=3)
-    visits = student.state_visitation_frequency(m.P, student.soft_value_iteration(m.P, m.features @ w, m.horizon),
+    visits = student.state_visitation_frequency(m.P, reference.soft_value_iteration(m.P, m.features @ w, m.horizon),
                                                 m.p0, m.horizon)
     analytic = mu_expert - m.features.T @ np.asarray(visits)
     eps = 1e-5
