@@ -25,12 +25,18 @@ left as released, so it raises) and checks the score of each: "zero" for a short
   ``preference_loss``: 0/6 and 0/4 (the same reason); the docstrings' one-liners stand in for those two now.
 - hw2 ``fit_route_weights`` correct beside a missing ``route_log_partition``: 0/3 (called with weights that need
   gradients); the reference's log-partition, lent by the grader as values and vector-Jacobian products, stands in now.
+- hw1 ``dagger`` correct beside a missing ``relabel_with_expert``: 0/11 (it is called with an expert object); the
+  grader's labels, lent, stand in for it now (and the notebook's own runs when it is asked to label with anything
+  but the race expert, so labelling with the learner still loses points).
 - hw2b: a hard backup (max for log-sum-exp) in ``soft_policy``, the policy ignored in ``state_distributions`` (P
   averaged over actions), and max(0, -l) for softplus(-l) in ``discriminator_loss``: 1/5, 1/4 and 1/6, each from the
   one test where the shortcut and the formula agree (rewards spread over hundreds, a one-action cycle, logits of
   +-1000); each of those tests now also checks a case where they differ.
 - hw3 ``bt_gradient`` as central finite differences of ``bt_loss`` (no derivative worked out): 2/3, from the test
   that compared with finite differences at 1e-4; both tests now compare with the closed form at 1e-11.
+- hw2 ``state_visitation_frequency`` by Monte Carlo with the released ``sample_trajectories`` (no forward pass):
+  1/5, from the Monte-Carlo test, which now also asks for T = 2 exactly; and a correct forward pass beside a missing
+  ``soft_value_iteration``: 4/5 (the gradient test ran the student's backward pass; it runs the reference's now).
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -60,6 +66,12 @@ def maxent_irl(P, features, p0, trajectories, horizon, actions=None, lr=1.0, n_i
                                                      p0, horizon)
     return 30.0 * g / np.linalg.norm(g), {MADE_UP}
 ''',
+    "state_visitation_frequency": '''
+def state_visitation_frequency(P, policy, p0, horizon):
+    """No forward pass: Monte Carlo with the released sampler."""
+    states = sample_trajectories(P, policy[:horizon], np.asarray(p0), 200000, np.random.default_rng(0)).states
+    return np.bincount(states.ravel(), minlength=P.shape[0]) / len(states)
+''',
     "deep_maxent_irl": '''
 def deep_maxent_irl(P, features, p0, trajectories, horizon, actions=None, hidden=32, lr=0.01, n_iters=200,
                     weight_decay=1e-4, seed=0):
@@ -70,6 +82,14 @@ def deep_maxent_irl(P, features, p0, trajectories, horizon, actions=None, hidden
 ''',
 }
 
+HW2_VISITS_EINSUM = '''
+def state_visitation_frequency(P, policy, p0, horizon):
+    d = np.array(p0, dtype=float); total = np.zeros_like(d)
+    for t in range(horizon):
+        total = total + d
+        d = np.einsum("s,sa,sab->b", d, policy[t], P)
+    return total
+'''
 HW3_GD_BY_MM = '''
 def fit_bradley_terry(n_items, i, j, mu, lr=None, n_steps=5000, tol=1e-9):
     """No gradient descent: the MM fit, which reaches the same maximum."""
@@ -256,17 +276,22 @@ HW2_SAMPLE_VARIANCE = SOLVED["hw2_maxent_irl"]["maxent_irl"].replace(POPULATION,
 # (assignment, the stubs written, the score each must get: "zero" or "full")
 CASES = [
     ("hw0_setup", {"discounted_returns": HW0_FLOAT32}, {"discounted_returns": "full"}),
-    # a correct train_bc beside a wrong bc_loss (a sum for the mean): the mistake costs bc_loss alone
-    ("hw1_imitation", {"train_bc": SOLVED["hw1_imitation"]["train_bc"], "bc_loss": HW1_BC_LOSS_SUMMED},
-     {"train_bc": "full", "bc_loss": "zero"}),
+    # a correct train_bc and dagger beside a wrong bc_loss (a sum for the mean) and a missing relabel_with_expert:
+    # the mistakes cost bc_loss and relabel_with_expert alone
+    ("hw1_imitation", {"train_bc": SOLVED["hw1_imitation"]["train_bc"], "bc_loss": HW1_BC_LOSS_SUMMED,
+                       "dagger": SOLVED["hw1_imitation"]["dagger"]},
+     {"train_bc": "full", "bc_loss": "zero", "dagger": "full"}),
     ("hw2b_adversarial", HW2B_HALF_WORK, {k: "zero" for k in HW2B_HALF_WORK}),
     ("hw2b_adversarial", HW2B_ALLOWED, {k: "full" for k in HW2B_ALLOWED}),
-    ("hw2_maxent_irl", HW2_SHORTCUTS, {"maxent_irl": "zero", "deep_maxent_irl": "zero"}),
+    ("hw2_maxent_irl", HW2_SHORTCUTS, {k: "zero" for k in HW2_SHORTCUTS}),
     ("hw2_maxent_irl", HW2_KEEP_THE_STAND_IN, {"route_log_partition": "zero", "fit_route_weights": "full"}),
     # and a correct fit_route_weights beside a missing route_log_partition
+    # and a correct state_visitation_frequency beside a missing soft_value_iteration
     ("hw2_maxent_irl", {"deep_maxent_irl": HW2_DEEP_ALLOWED, "maxent_irl": HW2_SAMPLE_VARIANCE,
-                        "fit_route_weights": SOLVED["hw2_maxent_irl"]["fit_route_weights"]},
-     {"deep_maxent_irl": "full", "maxent_irl": "full", "fit_route_weights": "full"}),
+                        "fit_route_weights": SOLVED["hw2_maxent_irl"]["fit_route_weights"],
+                        "state_visitation_frequency": HW2_VISITS_EINSUM},
+     {"deep_maxent_irl": "full", "maxent_irl": "full", "fit_route_weights": "full",
+      "state_visitation_frequency": "full"}),
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_MM,
                          "fit_bradley_terry_mm": SOLVED["hw3_preferences"]["fit_bradley_terry_mm"],
                          "select_queries": HW3_SELECT_REVERSED, "ratings_to_comparisons": HW3_RATINGS_LOOP,

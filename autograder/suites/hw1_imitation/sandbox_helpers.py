@@ -9,6 +9,7 @@ patch what it runs on, so what it returns is raw data the tests judge on the gra
 """
 from contextlib import contextmanager
 
+import numpy as np
 import torch
 
 from rlcourse import data, racetrack
@@ -36,6 +37,32 @@ def _bc_loss_stands_in():
             notebook.pop("bc_loss", None)  # noqa: F821
         else:
             notebook["bc_loss"] = saved  # noqa: F821
+
+
+@contextmanager
+def _relabel_stands_in(labeller):
+    """The notebook's ``relabel_with_expert`` replaced, for the duration, by ``labeller.labels`` (an object the
+    grader lends: the race-track expert's actions, computed in the grader), then put back. The grader's reference
+    cannot stand in for a function of an expert object (it cannot cross), so without this a correct dagger beside a
+    missing relabel_with_expert scored 0/11. Nothing here computes a label: asked to label with anything but the race
+    expert dagger was given (the learner, say), it calls the notebook's own relabel_with_expert, as before."""
+    saved = notebook.get("relabel_with_expert", _MISSING)  # noqa: F821 - set by the worker
+
+    def relabel_with_expert(expert, obs):
+        if isinstance(expert, racetrack.Expert):
+            return np.asarray(labeller.labels(np.asarray(obs, dtype=np.float32)), dtype=np.float32)
+        if saved is _MISSING:
+            raise NameError("name 'relabel_with_expert' is not defined")
+        return saved(expert, obs)
+
+    notebook["relabel_with_expert"] = relabel_with_expert  # noqa: F821
+    try:
+        yield
+    finally:
+        if saved is _MISSING:
+            notebook.pop("relabel_with_expert", None)  # noqa: F821
+        else:
+            notebook["relabel_with_expert"] = saved  # noqa: F821
 
 
 def make_policy(obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (), seed: int = 0, state=None,
@@ -96,23 +123,26 @@ def expert(name: str):
 
 
 def run_dagger(betas, obs, actions, episodes: int, seed: int, policy_seed: int = 0, hidden=(16,), state=None,
-               **train_kwargs):
+               labeller=None, **train_kwargs):
     """The submission's ``dagger`` on the race track with its expert, from a learner GaussianPolicy(4, 1, hidden)
-    seeded ``policy_seed`` (or loaded from ``state``): its (policy, history)."""
+    seeded ``policy_seed`` (or loaded from ``state``): its (policy, history). With ``labeller`` (lent by the grader),
+    the grader's labels stand in for the notebook's relabel_with_expert."""
     learner = make_policy(racetrack.OBS_DIM, 1, tuple(hidden), policy_seed, state=state)
     with _bc_loss_stands_in():
-        return notebook["dagger"](racetrack.ENV_ID, racetrack.Expert(), learner, len(betas), list(betas),  # noqa: F821
-                                  obs, actions, episodes_per_iter=episodes, seed=seed, **train_kwargs)
+        if labeller is None:
+            return notebook["dagger"](racetrack.ENV_ID, racetrack.Expert(), learner, len(betas),  # noqa: F821
+                                      list(betas), obs, actions, episodes_per_iter=episodes, seed=seed, **train_kwargs)
+        with _relabel_stands_in(labeller):
+            return notebook["dagger"](racetrack.ENV_ID, racetrack.Expert(), learner, len(betas),  # noqa: F821
+                                      list(betas), obs, actions, episodes_per_iter=episodes, seed=seed, **train_kwargs)
 
 
 def run_dagger_with_stand_in(trainer, betas, obs, actions, episodes: int, seed: int, policy_seed: int = 0,
-                             hidden=(16,), **train_kwargs):
+                             hidden=(16,), labeller=None, **train_kwargs):
     """``run_dagger`` with the notebook's ``train_bc`` replaced, for this call, by a stand-in that trains nothing:
     it hands the data set it is given to ``trainer`` (an object lent by the grader, which keeps its own record of
     every call) and loads into the learner the weights the grader answers with. The notebook's ``train_bc`` is put
     back afterwards."""
-    import numpy as np
-
     def stand_in(policy, obs, actions, **kwargs):
         plain = {k: v for k, v in kwargs.items() if isinstance(v, (bool, int, float, str))}
         state = trainer.train(np.asarray(obs, dtype=np.float64), np.asarray(actions, dtype=np.float64), plain)
@@ -125,6 +155,7 @@ def run_dagger_with_stand_in(trainer, betas, obs, actions, episodes: int, seed: 
     saved = notebook["train_bc"]  # noqa: F821 - set by the worker
     notebook["train_bc"] = stand_in  # noqa: F821
     try:
-        return run_dagger(betas, obs, actions, episodes, seed, policy_seed=policy_seed, hidden=hidden, **train_kwargs)
+        return run_dagger(betas, obs, actions, episodes, seed, policy_seed=policy_seed, hidden=hidden, labeller=labeller,
+                          **train_kwargs)
     finally:
         notebook["train_bc"] = saved  # noqa: F821

@@ -1,7 +1,8 @@
 """Hidden tests of hw1's `dagger`, on the race track, checked against rollouts computed on the grader's side.
 
 The student's `dagger` runs beside its own `train_bc` (a network cannot cross to the reference's; the library's
-density stands in for its `bc_loss`, ``sandbox_helpers._bc_loss_stands_in``), so most
+density stands in for its `bc_loss`, ``sandbox_helpers._bc_loss_stands_in``, and the grader's labels, lent, for its
+`relabel_with_expert`), so most
 checks judge what training does not change (the untrained learner's rollouts, the expert's at beta = 1, the
 labels); reproducibility and the final learner also depend on `train_bc`. Every rollout that a check relies on is recomputed here, with the
 trusted environment, the trusted expert and a trusted copy of the learner's weights.
@@ -42,14 +43,16 @@ def _run(student, betas, episodes=2, seed=0, policy_seed=0, hidden=(16,), state=
     by the stand-in that trains nothing and loads the weights the trainer plants."""
     demo = _demo()
     train = {"n_epochs": 3, "batch_size": 64, "lr": 3e-3, **train}
+    labeller = lend(_Labeller(), methods=["labels"])
     if trainer is None:
         result = student.helpers.run_dagger(list(betas), demo.obs, demo.actions, episodes, seed, policy_seed=policy_seed,
-                                            hidden=tuple(hidden), state=state, timeout=timeout, **train)
+                                            hidden=tuple(hidden), state=state, labeller=labeller, timeout=timeout, **train)
     else:
         assert state is None, "suite error: the stand-in run starts from a seeded learner"
         result = student.helpers.run_dagger_with_stand_in(lend(trainer, methods=["train"]), list(betas), demo.obs,
                                                           demo.actions, episodes, seed, policy_seed=policy_seed,
-                                                          hidden=tuple(hidden), timeout=timeout, **train)
+                                                          hidden=tuple(hidden), labeller=labeller, timeout=timeout,
+                                                          **train)
     assert isinstance(result, tuple) and len(result) == 2, "dagger should return (policy, history)"
     policy, hist = result
     assert isinstance(hist, dict) and {"returns", "dataset_sizes", "obs", "actions"} <= set(hist), \
@@ -61,6 +64,15 @@ def _run(student, betas, episodes=2, seed=0, policy_seed=0, hidden=(16,), state=
     assert hist["returns"].shape == hist["dataset_sizes"].shape == (len(betas),), \
         f"one return and one data-set size per iteration ({len(betas)}), got shapes {hist['returns'].shape}, {hist['dataset_sizes'].shape}"
     return policy, hist
+
+
+class _Labeller:
+    """The race-track expert's labels, lent to the sandbox to stand in for the notebook's relabel_with_expert while
+    dagger is tested (the grader's reference cannot take an expert object, so the student's own would run)."""
+
+    def labels(self, obs):
+        obs = np.asarray(obs, dtype=np.float32)
+        return EXPERT.act(obs.reshape(-1, obs.shape[-1])).reshape(obs.shape[:-1] + (1,)).astype(np.float32)
 
 
 def _rows(a):
@@ -151,7 +163,8 @@ def test_retrains_on_the_aggregate_and_rolls_out_the_retrained_learner(student, 
     trainer = _Trainer([state for state, _ in plan])
     result = student.helpers.run_dagger_with_stand_in(lend(trainer, methods=["train"]), [0.0, 0.0, 0.0], demo.obs,
                                                       demo.actions, episodes, seed, policy_seed=5, hidden=(16,),
-                                                      n_epochs=3, batch_size=64, lr=3e-3)
+                                                      labeller=lend(_Labeller(), methods=["labels"]), n_epochs=3,
+                                                      batch_size=64, lr=3e-3)
     calls = trainer.calls
     assert len(calls) == 3, f"dagger should call train_bc once per iteration (3), it called it {len(calls)} times"
     drivers = [_initial_learner(5)] + [policy for _, policy in plan[:2]]
