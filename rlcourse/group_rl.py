@@ -6,9 +6,9 @@ this module holds what the notebook gives them, built so that none of it is one 
 (hw5's students write the token log-probabilities, the Bradley-Terry loss and the DPO loss, and the
 whole release is readable while hw5 is graded):
 
-- :func:`completion_log_probs` and :func:`completion_log_prob_sums`: a language model's log-probabilities
-  of the completion tokens of sequences, computed by running the model (they take a model and a prompt
-  length, never logits and a mask);
+- :func:`completion_log_probs` and :func:`completion_log_prob_sums` (from :mod:`rlcourse.completions`): a
+  language model's log-probabilities of the completion tokens of sequences, computed by running the model
+  (they take a model and a prompt length, never logits and a mask);
 - :func:`load_reward_model` and :func:`proxy_score`: the Bradley-Terry reward model on the shipped
   preference pairs, fitted by the instructors' script ``datasets/scripts/make_hw6_models.py`` and
   shipped as weights, standardised on those pairs; :func:`load_dpo_policy`: DPO's policy from the
@@ -27,37 +27,14 @@ import math
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from rlcourse.checkpoint import load_model
-from rlcourse.lm import LMConfig, ScalarHeadLM, TinyLM, completion_mask, load_lm
+from rlcourse.completions import completion_log_prob_sums, completion_log_probs  # noqa: F401 - given to hw6 from here
+from rlcourse.lm import LMConfig, ScalarHeadLM, TinyLM, load_lm
 
 
 REWARD_MODEL_FILE = "hw6/reward_model.pt"
 DPO_POLICY_FILE = "hw6/dpo_beta0.1.pt"
-
-
-def completion_log_probs(model: TinyLM, tokens: torch.Tensor, prompt_len: int) -> torch.Tensor:
-    """``(B, T)`` log-probabilities under ``model`` of each completion token of ``tokens``, 0 elsewhere.
-
-    ``tokens`` ``(B, T)`` are prompts of ``prompt_len >= 1`` tokens followed by completions padded with 0
-    (as :func:`rlcourse.lm.generate` returns them). Entry ``[b, t]`` is the log-probability the model gives
-    ``tokens[b, t]`` after ``tokens[b, :t]`` on the completion tokens (:func:`rlcourse.lm.completion_mask`)
-    and exactly 0 on the prompt and the padding. Differentiable in the model's parameters. The model must
-    be a :class:`~rlcourse.lm.TinyLM`: the helper runs it, and takes no logits.
-    """
-    if not isinstance(model, TinyLM):
-        raise TypeError(f"completion_log_probs runs a TinyLM on the tokens; got {type(model).__name__}")
-    if prompt_len < 1:
-        raise ValueError(f"prompt_len = {prompt_len}: a completion follows a prompt of at least one token")
-    scores = F.log_softmax(model(tokens)[:, :-1], dim=-1).gather(-1, tokens[:, 1:, None]).squeeze(-1)
-    scores = F.pad(scores, (1, 0))
-    return torch.where(completion_mask(tokens, prompt_len).bool(), scores, torch.zeros_like(scores))
-
-
-def completion_log_prob_sums(model: TinyLM, tokens: torch.Tensor, prompt_len: int) -> torch.Tensor:
-    """``(B,)`` log-probability of each sequence's completion given its prompt: :func:`completion_log_probs` summed."""
-    return completion_log_probs(model, tokens, prompt_len).sum(dim=1)
 
 
 def load_reward_model() -> ScalarHeadLM:

@@ -31,7 +31,7 @@ from typing import Callable, Optional
 import numpy as np
 import torch
 
-from rlcourse.group_rl import completion_log_probs
+from rlcourse.completions import completion_log_probs
 from rlcourse.lm import LMConfig, TinyLM, completion_mask, generate, load_lm
 
 PAD, BOS, EOS, PLUS, EQUALS, SEMI = 0, 1, 2, 13, 14, 15
@@ -123,7 +123,7 @@ def finetune(model: TinyLM, tokens: torch.Tensor, loss_fn: LossFn, *, steps: int
     """A fine-tuned copy of ``model``: ``steps`` AdamW steps of ``loss_fn(logp, mask)`` on batches of ``tokens``.
 
     ``logp`` holds the model's log-probabilities of the completion tokens of the batch (0 on the prompt and
-    the padding, :func:`rlcourse.group_rl.completion_log_probs`) and ``mask`` marks them. ``model`` is left
+    the padding, :func:`rlcourse.completions.completion_log_probs`) and ``mask`` marks them. ``model`` is left
     alone; the copy is returned in eval mode.
     """
     gen = torch.Generator().manual_seed(seed)

@@ -74,6 +74,22 @@ def token_log_probs(logits, tokens, mask):
     keep[:, 0] = False
     return torch.where(keep, out, torch.zeros_like(out))
 """
+# hw7: pass@k is best-of-k with the pass indicators as both score and value, which hw6's pool estimator computes
+# (rlcourse.group_rl, once in hw7's view because rlcourse.verifier_rl imported a log-probability helper from it).
+POOL_ADAPTER = """
+import numpy as np
+
+def pass_at_k(n, c, k):
+    from rlcourse.group_rl import best_of_n_from_pool
+    n, c = np.broadcast_arrays(np.asarray(n, dtype=np.int64), np.asarray(c, dtype=np.int64))
+    if k < 1 or k > n.min():
+        raise ValueError("k must be between 1 and n")
+    out = np.empty(n.shape)
+    for idx in np.ndindex(n.shape):
+        hits = (np.arange(n[idx]) < c[idx]).astype(float)[None]
+        out[idx] = 1.0 if n[idx] - c[idx] < k else best_of_n_from_pool(hits, hits, k)[0]
+    return out
+"""
 # Any assignment: another assignment's release notebook, whose given cells would run as code; the stub is
 # right only where that file could be read (so a point means the file was in the view).
 OTHER_RELEASE = """
@@ -92,6 +108,7 @@ ATTACKS = {
                         "fit_bradley_terry_mm": BT_ADAPTER.format(name="fit_bradley_terry_mm"),
                         "plackett_luce_loss": PL_ADAPTER},
     "hw5_lm_alignment": {"token_log_probs": LOGPROB_ADAPTER},
+    "hw7_verifier_rl": {"pass_at_k": POOL_ADAPTER},
 }
 
 
@@ -149,9 +166,11 @@ def test_each_view_shows_its_own_release_and_the_library_it_needs_only():
         assert all(str(p) in masked and str(p) in view.secret
                    for p in (course.REPO / course.LIBRARY).rglob("__pycache__")), assignment
     # what the arrows of the library say: hw5 needs its loops but not hw6's helpers, hw3 not the spectrum's fitters
-    names = {a: {p.stem for p in course.library_modules(a)} for a in ("hw3_preferences", "hw5_lm_alignment")}
+    names = {a: {p.stem for p in course.library_modules(a)}
+             for a in ("hw3_preferences", "hw5_lm_alignment", "hw7_verifier_rl")}
     assert {"preferences", "__init__"} <= names["hw3_preferences"] and "feedback_spectrum" not in names["hw3_preferences"]
-    assert {"lm_training", "lm"} <= names["hw5_lm_alignment"] and "group_rl" not in names["hw5_lm_alignment"]
+    assert {"lm_training", "lm"} <= names["hw5_lm_alignment"] and not {"group_rl", "completions"} & names["hw5_lm_alignment"]
+    assert {"verifier_rl", "completions"} <= names["hw7_verifier_rl"] and "group_rl" not in names["hw7_verifier_rl"]
 
 
 def test_imports_are_read_from_the_ast_with_relative_and_nested_ones():
