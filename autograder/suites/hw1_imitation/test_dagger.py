@@ -1,11 +1,11 @@
 """Hidden tests of hw1's `dagger`, on the race track, checked against rollouts computed on the grader's side.
 
-The student's `dagger` runs beside its own `train_bc` (a network cannot cross to the reference's; the library's
-density stands in for its `bc_loss`, ``sandbox_helpers._bc_loss_stands_in``, and the grader's labels, lent, for its
-`relabel_with_expert`), so most
-checks judge what training does not change (the untrained learner's rollouts, the expert's at beta = 1, the
-labels); reproducibility and the final learner also depend on `train_bc`. Every rollout that a check relies on is recomputed here, with the
-trusted environment, the trusted expert and a trusted copy of the learner's weights.
+In the learning test the student's `dagger` runs beside its own `train_bc` (a network cannot cross to the
+reference's); elsewhere a lent stand-in that trains nothing replaces it. The library's density stands in for the
+notebook's `bc_loss` (``sandbox_helpers._bc_loss_stands_in``) and the grader's labels, lent, for its
+`relabel_with_expert`, so a mistake in those stubs costs them alone. Most checks judge what training does not change
+(the untrained learner's rollouts, the expert's at beta = 1, the labels). Every rollout that a check relies on is
+recomputed here, with the trusted environment, the trusted expert and a trusted copy of the learner's weights.
 """
 import numpy as np
 import torch
@@ -85,7 +85,9 @@ def _rows(a):
 def test_beta_zero_rolls_out_the_learner_and_adds_its_real_steps(student):
     """beta = 0: the rollouts are the initial learner's, and exactly its real steps are added, with expert labels"""
     demo, seed = _demo(), 5
-    _, hist = _run(student, [0.0], episodes=3, seed=seed, policy_seed=1)
+    # train_bc replaced by the stand-in: only what is rolled out before training is judged (the student's own
+    # train_bc, missing or wrong, cost this test before)
+    _, hist = _run(student, [0.0], episodes=3, seed=seed, policy_seed=1, trainer=_Trainer([_planted(71)[0]]))
     own = rollout(_initial_learner(1).act, racetrack.ENV_ID, 3, seed=seed)
     check_scalar(hist["returns"][0], float(own.returns.mean()), rtol=1e-4,
                  name="the first iteration's mean return (the untrained learner's own episodes)")
@@ -103,7 +105,9 @@ def test_beta_zero_rolls_out_the_learner_and_adds_its_real_steps(student):
 def test_every_label_is_the_experts_action(student):
     """With a mixture and an untrained learner, every label in the data set is the expert's action at its state"""
     demo = _demo()
-    _, hist = _run(student, [0.5, 0.0, 0.0], episodes=2, seed=1, policy_seed=2)
+    # train_bc replaced by the stand-in (the labels do not depend on what the learner becomes)
+    _, hist = _run(student, [0.5, 0.0, 0.0], episodes=2, seed=1, policy_seed=2,
+                   trainer=_Trainer([_planted(72 + k)[0] for k in range(3)]))
     assert hist["obs"].ndim == 2 and hist["obs"].shape[1] == 4 and hist["actions"].shape == (len(hist["obs"]), 1), \
         f"the data set should be (N, 4) states and (N, 1) labels, got {hist['obs'].shape} and {hist['actions'].shape}"
     check_array(hist["obs"][:len(demo.obs)], demo.obs, rtol=0, atol=0, name="the first rows of the data set (the demonstrations)")
@@ -215,7 +219,7 @@ def test_reproducible_under_a_seed(student):
         "a different seed gave the same data set: seed the rollouts and the mixture from `seed`"
 
 
-@stub("dagger", points=2, hint=HINT)
+@stub("dagger", points=2, hint=HINT + " This test trains with your own train_bc.")
 def test_learns_to_drive(student, reference, trusted_copy):
     """Six iterations from a clone of one demonstration: the learner then stays on the track like the expert"""
     # The suite's one learning test of dagger, on the smallest instance that still separates (two episodes an
