@@ -30,6 +30,8 @@ def summary_lines(result: GradeResult) -> list[str]:
     width = max([len(s.name) for s in result.stubs] + [4])
     lines = [f"{result.assignment} · {name}: {points(result.score)}/{points(result.max_score)}"
              + (f"  (ungradable: {one_line(cap(result.error, TERMINAL_MESSAGE_CHARS))})" if result.error else "")]
+    if result.wrong_notebook:
+        lines.append(f"  {one_line(result.wrong_notebook)}")
     for stub in result.stubs:
         failed = [t for t in stub.tests if not t.passed]
         why = f"  {one_line(failed[0].message)[:TERMINAL_MESSAGE_CHARS]}" if failed else ""

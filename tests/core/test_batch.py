@@ -213,6 +213,8 @@ def test_what_a_folder_of_notebooks_holds_besides_this_assignments_work_is_named
     assert rows["fay"]["reason"] == rows["bob"]["reason"] == "", "a notebook with its stubs: nothing to say"
     assert "hw1\\_imitation's" in (out / "erin" / "feedback.md").read_text()
     assert "hw1_imitation's" in load_result(out / "erin").wrong_notebook
+    from autograder.outputs.terminal import summary_lines
+    assert "hw1_imitation's" in summary_lines(load_result(out / "erin"))[1], "grade's summary says it too"
 
 
 def test_a_notebook_handed_in_again_is_graded_again_and_an_older_suites_results_are_named(open_tmp):
