@@ -144,6 +144,7 @@ class Transport:
 
     def __init__(self) -> None:
         self.lent: dict[int, Lend] = {}
+        self.lent_count = 0  # ids are never reused: a reference kept from an earlier test names nothing later
 
     def request(self, header: dict[str, Any], blobs: list[bytes], timeout: float | None = None) -> Any:
         raise NotImplementedError
@@ -153,9 +154,10 @@ class Transport:
         if isinstance(value, Handle):
             return value._ref()
         if isinstance(value, Lend):
-            self.lent[len(self.lent) + 1] = value
+            self.lent_count += 1
+            self.lent[self.lent_count] = value
             attrs = {name: getattr(value.obj, name) for name in value.attrs}
-            return LentRef(len(self.lent), type(value.obj).__name__, list(value.methods), attrs)
+            return LentRef(self.lent_count, type(value.obj).__name__, list(value.methods), attrs)
         raise TypeError(f"cannot send a {type(value).__name__} to the sandbox")
 
     def call_lent(self, id: int, method: str, args: list, kwargs: dict) -> Any:
@@ -456,6 +458,7 @@ class Session(Transport):
         """The test is over; what it cost: wall seconds from its start, messages, the worker's CPU, the CPU wait
         forgiven."""
         self.test_deadline = None
+        self.lent.clear()  # what a test lends is its own: code that kept a reference cannot call it in a later test
         start, self._test_start = self._test_start, None
         if start is None:
             return {}

@@ -139,6 +139,33 @@ def test_a_lent_object_stays_in_the_grader(fx_grader):
         session.close()
 
 
+def test_a_lent_object_is_its_tests_alone(fx_grader):
+    """Code that keeps a lent object's reference (a global) cannot call it once the test that lent it is over, nor
+    reach a later test's object through the old reference's id."""
+    from autograder.core.session import Cell, Namespace, Session, StudentError
+    from autograder.suite import lend
+
+    keep = "KEPT = []\ndef keep(env):\n    KEPT.append(env)\n    return env.duel(2, 1)\n"
+    session = Session(fx_grader.zygote, [Cell("setup", "import numpy as np"), Cell("keep", keep)], fx_grader.config)
+    try:
+        session.start()
+        student, first, second = Namespace(session, "student"), _Bandit(), _Bandit()
+        session.begin_test()
+        assert student.keep(lend(first, methods=["duel"])) == 1.0 and first.calls == 1
+        assert student.eval("KEPT[0].duel(0, 1)") == 0.0, "within its test, the reference works"
+        session.end_test()
+        session.begin_test()
+        with pytest.raises(StudentError, match="not lent"):
+            student.eval("KEPT[0].duel(2, 1)")
+        assert student.keep(lend(second, methods=["duel"])) == 1.0
+        with pytest.raises(StudentError, match="not lent"):  # the first reference's id does not name the second
+            student.eval("KEPT[0].duel(2, 1)")
+        assert first.calls == 2 and second.calls == 1
+        session.end_test()
+    finally:
+        session.close()
+
+
 def test_student_text_cannot_forge_the_terminal_the_feedback_or_the_gradebook(tmp_path):
     """An exception message with terminal escapes, Markdown links and a formula is shown inert everywhere."""
     import csv
