@@ -37,6 +37,9 @@ left as released, so it raises) and checks the score of each: "zero" for a short
 - hw2 ``state_visitation_frequency`` by Monte Carlo with the released ``sample_trajectories`` (no forward pass):
   1/5, from the Monte-Carlo test, which now also asks for T = 2 exactly; and a correct forward pass beside a missing
   ``soft_value_iteration``: 4/5 (the gradient test ran the student's backward pass; it runs the reference's now).
+- hw3 ``fit_bradley_terry_mm`` answered by scipy's BFGS on the loss (no MM iteration): 4/4; its docstring now says
+  the iteration starts from equal strengths and updates every item at once, and its three tests ask for two MM
+  iterations from there.
 - hw0 ``discounted_returns`` returning float32 ("a float array"): 4/5, refused at rtol 1e-8; now float32 is compared
   at float32's precision.
 """
@@ -253,6 +256,22 @@ def policy_reward(logits, kind):
 ''',
 }
 
+HW3_MM_BY_SCIPY = '''
+def fit_bradley_terry_mm(n_items, i, j, mu, n_iters=5000, tol=1e-10):
+    """No MM: scipy's BFGS on the mean loss, to a stationary point."""
+    from scipy.optimize import minimize
+    from scipy.special import expit, log_expit
+    i, j, mu = np.asarray(i), np.asarray(j), np.asarray(mu, dtype=float)
+    def f(u):
+        d = u[i] - u[j]
+        return -np.mean(mu * log_expit(d) + (1 - mu) * log_expit(-d))
+    def g(u):
+        gg = (expit(u[i] - u[j]) - mu) / len(i)
+        return np.bincount(i, gg, minlength=n_items) - np.bincount(j, gg, minlength=n_items)
+    res = minimize(f, np.zeros(n_items), jac=g, method="BFGS", options={"gtol": 1e-13, "maxiter": 10000})
+    return res.x - res.x.mean()
+'''
+
 SOLVED = {a: solution_sources(a) for a in ("hw1_imitation", "hw2_maxent_irl", "hw3_preferences")}
 MEAN = "return neg_log_density.sum(dim=-1).mean()"
 assert MEAN in SOLVED["hw1_imitation"]["bc_loss"], "the reference bc_loss's last line has moved"
@@ -299,8 +318,9 @@ CASES = [
      {"fit_bradley_terry": "zero", "fit_bradley_terry_mm": "full", "select_queries": "full",
       "ratings_to_comparisons": "full", "bt_gradient": "full"}),
     ("hw3_preferences", {"fit_bradley_terry": HW3_GD_BY_SCIPY, "bt_loss": SOLVED["hw3_preferences"]["bt_loss"],
-                         "select_queries": HW3_SELECT_TOPK, "bt_gradient": HW3_GRADIENT_BY_DIFFERENCES},
-     {"fit_bradley_terry": "zero", "select_queries": "full", "bt_gradient": "zero"}),
+                         "select_queries": HW3_SELECT_TOPK, "bt_gradient": HW3_GRADIENT_BY_DIFFERENCES,
+                         "fit_bradley_terry_mm": HW3_MM_BY_SCIPY},
+     {"fit_bradley_terry": "zero", "select_queries": "full", "bt_gradient": "zero", "fit_bradley_terry_mm": "zero"}),
     # correct stubs beside missing ones they call with networks (which the grader's reference cannot take)
     ("hw3_preferences", {"train_reward_model": SOLVED["hw3_preferences"]["train_reward_model"],
                          "select_queries": SOLVED["hw3_preferences"]["select_queries"]},

@@ -65,27 +65,51 @@ def test_gd_random_instance(student, reference, rng):
     _check_gradient_descent(student, 15, i, j, mu)
 
 
+def _mm_steps(n_items, i, j, mu, n_steps):
+    """``n_steps`` simultaneous MM updates from equal strengths (computed here), centred in log space."""
+    mu = np.asarray(mu, dtype=float)
+    wins = np.bincount(i, mu, minlength=n_items) + np.bincount(j, 1.0 - mu, minlength=n_items)
+    log_pi = np.zeros(n_items)
+    for _ in range(n_steps):
+        inv = 1.0 / (np.exp(log_pi[i]) + np.exp(log_pi[j]))
+        log_pi = np.log(wins) - np.log(np.bincount(i, inv, minlength=n_items) + np.bincount(j, inv, minlength=n_items))
+        log_pi -= log_pi.mean()
+    return log_pi
+
+
+def _check_mm_steps(student, n_items, i, j, mu):
+    """The maximum-likelihood utilities alone are reached by any optimiser (scipy's on bt_loss, or gradient
+    descent): the fit must also be the documented MM iteration, which two iterations from equal strengths show."""
+    check_array(student.fit_bradley_terry_mm(n_items, i, j, mu, n_iters=2), _mm_steps(n_items, i, j, mu, 2),
+                rtol=1e-6, atol=1e-10, name="the utilities after n_iters = 2 MM iterations from equal strengths "
+                "(every item updated at once: pi_k <- wins_k / sum over k's comparisons of 1 / (pi_k + pi_other); "
+                "not another optimiser)")
+
+
 @stub("fit_bradley_terry_mm", points=2, hint=MM_HINT)
 def test_mm_recovers_shipped_utilities(student, reference):
-    """On the shipped items: mean zero, Spearman >= 0.95, and the maximum-likelihood values"""
+    """On the shipped items: mean zero, Spearman >= 0.95, the maximum-likelihood values, and two MM iterations"""
     got, d = _shipped_recovery(student.fit_bradley_terry_mm)
     check_array(got, reference.fit_bradley_terry(d["n_items"], d["i"], d["j"], d["mu"]), atol=1e-4,
                 name="the fitted utilities")
+    _check_mm_steps(student, d["n_items"], d["i"], d["j"], d["mu"])
 
 
 @stub("fit_bradley_terry_mm", points=1, hint=MM_HINT)
 def test_mm_random_instance_with_ties(student, reference, rng):
-    """A random instance where ties are frequent: ties count half a win"""
+    """A random instance where ties are frequent: ties count half a win (the fit, and two MM iterations)"""
     u, i, j, _ = _random_instance(rng, 10, 1200)
     mu = sample_labels(u[i] - u[j], 1.0, rng)           # about 45% ties
     check_array(student.fit_bradley_terry_mm(10, i, j, mu), reference.fit_bradley_terry(10, i, j, mu), atol=1e-4)
+    _check_mm_steps(student, 10, i, j, mu)
 
 
 @stub("fit_bradley_terry_mm", points=1, hint="Iterate until the log-strengths stop moving (tol), not a fixed few steps.")
 def test_mm_reaches_a_stationary_point(student, reference, rng):
-    """The MM fit of a random instance is a stationary point of the mean loss"""
+    """The MM fit of a random instance is a stationary point of the mean loss (and two MM iterations)"""
     _, i, j, mu = _random_instance(rng, 12, 1000)
     got = student.fit_bradley_terry_mm(12, i, j, mu)
     assert isinstance(got, np.ndarray) and got.shape == (12,), f"expected 12 utilities, got {np.shape(got)}"
     grad = reference.bt_gradient(got, i, j, mu)
     assert np.abs(grad).max() < 1e-7, f"the gradient of the loss at your fit is {np.abs(grad).max():.1e}, not ~0"
+    _check_mm_steps(student, 12, i, j, mu)
