@@ -90,3 +90,19 @@ def check_hand_mutants(assignment: str, mutants: dict[str, dict[str, tuple[str, 
         print(f"| `{stub}` | {len(kills)} | {sum(kills)} ({sum(kills) / len(kills):.0%}) |")
     assert not leaks, leaks
     assert not survivors, f"mutants the suite does not catch: {survivors}"
+
+
+def graded_stubs(assignment: str, stubs: dict[str, str], path: Path) -> dict:
+    """Grade ``assignment``'s solution notebook with ``stubs`` (name -> source) in place of those stub cells,
+    written to ``path``: each stub's result by name (the grading must have a score)."""
+    from autograder.authoring.samples import _with_stubs
+    from autograder.core.grader import Grader
+
+    nbformat.write(_with_stubs(assignment, stubs), str(path))
+    grader = Grader(assignment)
+    try:
+        result = grader.grade(path)
+    finally:
+        grader.close()
+    assert result.has_score, result.error
+    return {s.name: s for s in result.stubs}

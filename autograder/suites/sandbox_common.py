@@ -12,8 +12,11 @@ choose the verdict. Given classes are imported from the release by their full pa
 the notebook, where a submission may have bound its own object to the name.
 """
 import importlib
+from contextlib import contextmanager
 
 import torch
+
+_ABSENT = object()
 
 
 def build(path: str, *args, torch_seed=None, **kwargs):
@@ -106,3 +109,21 @@ def call_and_inputs(stub: str, args, kwargs=None):
     args, kwargs = list(args), dict(kwargs or {})
     out = notebook[stub](*args, **kwargs)  # noqa: F821 - set by the worker
     return out, args, kwargs
+
+
+@contextmanager
+def standing_in(**functions):
+    """The notebook's functions of these names replaced by ``functions`` for the duration, then put back (or removed
+    again where the notebook defined none). A suite's own stand-in for a stub that the grader's reference cannot
+    replace, because it is called with a network or a tensor that needs gradients (which cannot cross), so that a
+    mistake in that stub costs it alone, not the stubs that call it."""
+    saved = {name: notebook.get(name, _ABSENT) for name in functions}  # noqa: F821 - set by the worker
+    notebook.update(functions)  # noqa: F821
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is _ABSENT:
+                notebook.pop(name, None)  # noqa: F821
+            else:
+                notebook[name] = value  # noqa: F821

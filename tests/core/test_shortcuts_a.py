@@ -47,13 +47,12 @@ from __future__ import annotations
 
 import sys
 
-import nbformat
 import numpy as np
 import pytest
 
-from autograder.authoring.samples import _with_stubs, solution_sources
+from autograder.authoring.samples import solution_sources
 from autograder.core import course
-from autograder.core.grader import Grader
+from conftest import graded_stubs
 
 pytestmark = pytest.mark.slow  # a few gradings: make test-fast leaves it out
 
@@ -331,15 +330,7 @@ CASES = [
 @pytest.mark.parametrize("case", range(len(CASES)), ids=[f"{a}-{'-'.join(w)}" for a, _, w in CASES])
 def test_shortcuts_earn_nothing_and_allowed_variants_everything(case, open_tmp):
     assignment, stubs, want = CASES[case]
-    path = open_tmp / f"{assignment}_{case}.ipynb"
-    nbformat.write(_with_stubs(assignment, stubs), str(path))
-    grader = Grader(assignment)
-    try:
-        result = grader.grade(path)
-    finally:
-        grader.close()
-    assert result.has_score, result.error
-    scores = {s.name: s for s in result.stubs}
+    scores = graded_stubs(assignment, stubs, open_tmp / f"{assignment}_{case}.ipynb")
     for name, outcome in want.items():
         stub = scores[name]
         failed = [f"{t.name}: {t.message}" for t in stub.tests if not t.passed]

@@ -11,12 +11,10 @@ commits that fixed them say on how many redraws, where the draw mattered).
 """
 from __future__ import annotations
 
-import nbformat
 import pytest
 
-from autograder.authoring.samples import _with_stubs
-from autograder.core.grader import Grader
 from autograder.core.results import Reason
+from conftest import graded_stubs
 
 pytestmark = pytest.mark.slow  # a few gradings: make test-fast leaves it out
 
@@ -435,21 +433,12 @@ def position_swap(judge, a, b):
 }
 
 
-def _grade(assignment: str, stubs: dict[str, str], path):
-    nbformat.write(_with_stubs(assignment, stubs), str(path))
-    grader = Grader(assignment)
-    try:
-        result = grader.grade(path)
-    finally:
-        grader.close()
-    assert result.has_score, result.error
-    return {s.name: s for s in result.stubs}
 
 
 @pytest.mark.parametrize("assignment", sorted(SHORTCUTS))
 def test_shortcuts_lose_their_points(assignment, open_tmp):
     cases = SHORTCUTS[assignment]
-    stubs = _grade(assignment, {name: source for name, (source, _) in cases.items()}, open_tmp / "shortcuts.ipynb")
+    stubs = graded_stubs(assignment, {name: source for name, (source, _) in cases.items()}, open_tmp / "shortcuts.ipynb")
     for name, (_, must_fail) in cases.items():
         passed = [t.name for t in stubs[name].tests if t.passed]
         assert any(t.reason == Reason.WRONG for t in stubs[name].tests), \
@@ -466,7 +455,7 @@ def test_shortcuts_lose_their_points(assignment, open_tmp):
 
 @pytest.mark.parametrize("assignment", sorted(VARIANTS))
 def test_allowed_variants_earn_full_marks(assignment, open_tmp):
-    stubs = _grade(assignment, VARIANTS[assignment], open_tmp / "variants.ipynb")
+    stubs = graded_stubs(assignment, VARIANTS[assignment], open_tmp / "variants.ipynb")
     for name in VARIANTS[assignment]:
         failed = {t.name: t.message for t in stubs[name].tests if not t.passed}
         assert not failed, f"{assignment}: an allowed variant of {name} lost {failed}"

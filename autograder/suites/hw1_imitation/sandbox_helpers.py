@@ -15,8 +15,6 @@ import torch
 from rlcourse import data, racetrack
 from rlcourse.nets import GaussianPolicy
 
-_MISSING = object()
-
 
 def _library_bc_loss(policy, obs, actions):
     """bc_loss by the library's own density, as the public check states it: the grader's reference cannot stand in
@@ -28,15 +26,8 @@ def _library_bc_loss(policy, obs, actions):
 def _bc_loss_stands_in():
     """The notebook's ``bc_loss`` replaced by :func:`_library_bc_loss` for the duration (put back afterwards): a
     mistake in bc_loss costs bc_loss alone, not the train_bc and dagger that call it."""
-    saved = notebook.get("bc_loss", _MISSING)  # noqa: F821 - set by the worker
-    notebook["bc_loss"] = _library_bc_loss  # noqa: F821
-    try:
+    with standing_in(bc_loss=_library_bc_loss):  # noqa: F821 - sandbox_common's, same module
         yield
-    finally:
-        if saved is _MISSING:
-            notebook.pop("bc_loss", None)  # noqa: F821
-        else:
-            notebook["bc_loss"] = saved  # noqa: F821
 
 
 @contextmanager
@@ -46,23 +37,17 @@ def _relabel_stands_in(labeller):
     cannot stand in for a function of an expert object (it cannot cross), so without this a correct dagger beside a
     missing relabel_with_expert scored 0/11. Nothing here computes a label: asked to label with anything but the race
     expert dagger was given (the learner, say), it calls the notebook's own relabel_with_expert, as before."""
-    saved = notebook.get("relabel_with_expert", _MISSING)  # noqa: F821 - set by the worker
+    own = notebook.get("relabel_with_expert")  # noqa: F821 - set by the worker; the notebook's, before the swap
 
     def relabel_with_expert(expert, obs):
         if isinstance(expert, racetrack.Expert):
             return np.asarray(labeller.labels(np.asarray(obs, dtype=np.float32)), dtype=np.float32)
-        if saved is _MISSING:
+        if own is None:
             raise NameError("name 'relabel_with_expert' is not defined")
-        return saved(expert, obs)
+        return own(expert, obs)
 
-    notebook["relabel_with_expert"] = relabel_with_expert  # noqa: F821
-    try:
+    with standing_in(relabel_with_expert=relabel_with_expert):  # noqa: F821 - sandbox_common's, same module
         yield
-    finally:
-        if saved is _MISSING:
-            notebook.pop("relabel_with_expert", None)  # noqa: F821
-        else:
-            notebook["relabel_with_expert"] = saved  # noqa: F821
 
 
 def make_policy(obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (), seed: int = 0, state=None,

@@ -7,8 +7,6 @@ from contextlib import contextmanager
 
 import numpy as np
 
-_MISSING = object()
-
 
 @contextmanager
 def _log_partition_stands_in(model):
@@ -32,15 +30,8 @@ def _log_partition_stands_in(model):
     def route_log_partition(weights, net, origins, destinations, horizon):
         return LogZ.apply(torch.as_tensor(weights, dtype=torch.float64), origins, destinations, horizon)
 
-    saved = notebook.get("route_log_partition", _MISSING)  # noqa: F821 - set by the worker
-    notebook["route_log_partition"] = route_log_partition  # noqa: F821
-    try:
+    with standing_in(route_log_partition=route_log_partition):  # noqa: F821 - sandbox_common's, same module
         yield
-    finally:
-        if saved is _MISSING:
-            notebook.pop("route_log_partition", None)  # noqa: F821
-        else:
-            notebook["route_log_partition"] = saved  # noqa: F821
 
 
 def run_fit_route_weights(model, *args, **kwargs):

@@ -7,8 +7,6 @@ from contextlib import contextmanager
 
 import numpy as np
 
-_MISSING = object()
-
 
 @contextmanager
 def _part_c_stand_ins():
@@ -29,17 +27,8 @@ def _part_c_stand_ins():
         d = returns_a - returns_b
         return torch.nn.functional.binary_cross_entropy_with_logits(d, torch.as_tensor(mu, dtype=d.dtype).expand_as(d))
 
-    stand_ins = {"segment_return": segment_return, "preference_loss": preference_loss}
-    saved = {name: notebook.get(name, _MISSING) for name in stand_ins}  # noqa: F821 - set by the worker
-    notebook.update(stand_ins)  # noqa: F821
-    try:
+    with standing_in(segment_return=segment_return, preference_loss=preference_loss):  # noqa: F821 - sandbox_common's
         yield
-    finally:
-        for name, value in saved.items():
-            if value is _MISSING:
-                notebook.pop(name, None)  # noqa: F821
-            else:
-                notebook[name] = value  # noqa: F821
 
 
 def run_train_reward_model(*args, **kwargs):
