@@ -390,4 +390,17 @@ def test_mode_coverage_random_labels_never_draw_an_expert_that_never_passed():
     """hw1b: seed 1575 of the test's generator draws, in its first round, an expert whose episodes all failed to pass
     (about 1 draw in 2,000), where a correct stub must raise; the test hands over a passing episode instead."""
     suite = _suite_module("hw1b_multimodal", "test_mode_coverage")
-    suite.test_fractions_and_coverage_on_random_labels(_CorrectModeCoverage(), np.random.default_rng(1575))
+    rng = np.random.default_rng(1575)                 # the premise: the first round's expert, as drawn, never passes
+    suite._labels(rng, int(rng.integers(20, 60)), rng.dirichlet(np.ones(3)))
+    drawn = suite._labels(rng, int(rng.integers(10, 40)), rng.dirichlet(np.ones(3)) * 0.8 + np.array([0.1, 0.1, 0.0]))
+    assert not (drawn != 0).any(), "seed 1575 no longer draws an expert that never passed: pick another seed"
+    seen = []
+
+    class Recording(_CorrectModeCoverage):
+        @staticmethod
+        def mode_coverage(sides, expert_sides):
+            seen.append(np.asarray(expert_sides).copy())
+            return _CorrectModeCoverage.mode_coverage(sides, expert_sides)
+
+    suite.test_fractions_and_coverage_on_random_labels(Recording(), np.random.default_rng(1575))
+    assert len(seen) == 3 and all((e != 0).any() for e in seen), "every expert handed over passes at least once"
