@@ -252,30 +252,32 @@ def drift_runs(part: tuple[int, int]) -> None:
     jobs = [(name, seed) for name in DRIFT_SETTINGS for seed in DRIFT_SEEDS]
     index, n_parts = part
     for j, (name, seed) in enumerate(jobs):
-        if j % n_parts != index or (name, seed) in _done():
+        if j % n_parts != index or (name, seed) in _done(DRIFT_PARTIAL):
             continue
         print(f"{name}, seed {seed} (run {j + 1} of {len(jobs)}; about a minute of CPU time, 10-15 minutes of wall time on the loaded 2-core machine):", flush=True)
         t, cpu = time.time(), time.process_time()
         run = drift.drift_run(ns["train_bc"], ns["dagger"], expert, env_id, demos, seed, float(expert_returns.mean()),
                               hidden=DRIFT_SETTINGS[name], log=lambda line: print(line, flush=True), **DRIFT_RUN)
         run.update(name=name, wall_s=round(time.time() - t, 1), cpu_s=round(time.process_time() - cpu, 1))
-        _append(run, expert_returns)
+        _append(DRIFT_PARTIAL, run, expert_returns=[float(x) for x in expert_returns])
 
 
-def _done() -> set:
-    if not DRIFT_PARTIAL.exists():
-        return set()
-    return {(r["name"], r["seed"]) for r in json.loads(DRIFT_PARTIAL.read_text())["runs"]}
+def _partial(path: Path) -> dict:
+    """A resumable run's partial file: ``{"runs": [...], ...}`` (empty before its first run)."""
+    return json.loads(path.read_text()) if path.exists() else {"runs": []}
 
 
-def _append(run: dict, expert_returns: np.ndarray) -> None:
-    """Add one run to the partial file (re-read first: the parts write to it in turn), atomically."""
-    state = json.loads(DRIFT_PARTIAL.read_text()) if DRIFT_PARTIAL.exists() else {"runs": []}
-    state["expert_returns"] = [float(x) for x in expert_returns]
+def _done(path: Path) -> set:
+    return {(r["name"], r["seed"]) for r in _partial(path)["runs"]}
+
+
+def _append(path: Path, run: dict, **fields) -> None:
+    """Add one run (and ``fields``) to a partial file, re-read first (the parts write to it in turn), atomically."""
+    state = _partial(path) | fields
     state["runs"] = [r for r in state["runs"] if (r["name"], r["seed"]) != (run["name"], run["seed"])] + [run]
-    tmp = DRIFT_PARTIAL.with_suffix(f".{os.getpid()}.tmp")
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps(state, indent=1))
-    tmp.replace(DRIFT_PARTIAL)
+    tmp.replace(path)
 
 
 def drift_summary() -> dict:
@@ -285,7 +287,7 @@ def drift_summary() -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    state = json.loads(DRIFT_PARTIAL.read_text())
+    state = _partial(DRIFT_PARTIAL)
     settings = []
     fig, axes = plt.subplots(1, len(DRIFT_SETTINGS), figsize=(5 * len(DRIFT_SETTINGS), 3.8), sharey=True)
     print("| learner | labels (mean over seeds) | BC, same labels | DAgger | (DAgger - BC) / larger spread | target met |")
@@ -326,10 +328,6 @@ def _recorded_drift() -> dict:
     return results["drift"]
 
 
-def _dart_done() -> dict:
-    return json.loads(DART_PARTIAL.read_text()) if DART_PARTIAL.exists() else {"runs": []}
-
-
 def dart_runs(part: tuple[int, int]) -> None:
     """Run this part's (setting, seed) DART runs at the labels DAgger ended with, skipping finished ones."""
     recorded = _recorded_drift()
@@ -346,7 +344,7 @@ def dart_runs(part: tuple[int, int]) -> None:
     jobs = [(s["name"], seed, labels) for s in recorded["settings"] for seed, labels in zip(s["seeds"], s["labels"])]
     index, n_parts = part
     for j, (name, seed, labels) in enumerate(jobs):
-        if j % n_parts != index or any((r["name"], r["seed"]) == (name, seed) for r in _dart_done()["runs"]):
+        if j % n_parts != index or (name, seed) in _done(DART_PARTIAL):
             continue
         print(f"{name}, seed {seed}, {labels} labels (run {j + 1} of {len(jobs)}):", flush=True)
         t, cpu = time.time(), time.process_time()
@@ -355,16 +353,12 @@ def dart_runs(part: tuple[int, int]) -> None:
                              **DRIFT_RUN)
         run.update(name=name, expert_return_now=now, wall_s=round(time.time() - t, 1),
                    cpu_s=round(time.process_time() - cpu, 1))
-        state = _dart_done()  # re-read: the parts write in turn
-        state["runs"] = [r for r in state["runs"] if (r["name"], r["seed"]) != (name, seed)] + [run]
-        tmp = DART_PARTIAL.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(state, indent=1))
-        tmp.replace(DART_PARTIAL)
+        _append(DART_PARTIAL, run)
 
 
 def dart_summary(recorded: dict) -> dict:
     """The "dart" object of the drift results from the partial file; prints the three learners' table."""
-    runs = _dart_done()["runs"]
+    runs = _partial(DART_PARTIAL)["runs"]
     settings = []
     print("| learner | labels (mean) | BC, same labels | BC refitted | DART | DAgger | disturbed expert | noise sd (mean of 3) |")
     print("|---|---|---|---|---|---|---|---|")

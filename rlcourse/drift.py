@@ -277,7 +277,8 @@ def dart_run(train_bc, expert, env_id: str, demos, seed: int, expert_return: flo
     Returns ``{"seed", "labels", "noise_std"`` (square roots of the moment's diagonal), ``"noise_cov"``,
     ``"noisy_expert"`` (the disturbed expert's mean return per whole episode, as a fraction of
     ``expert_return``), ``"dart"`` (the learner's fraction), and, with ``rescore_clone``, ``"bc_matched"``
-    (the clone's own fraction, which must equal :func:`drift_run`'s on the same machine)``}``.
+    (the clone's own fraction: :func:`drift_run`'s same-labels clone drawn again, equal to it only where
+    rollouts repeat to the last digit, since Hopper's contacts amplify any difference)``}``.
     ``drift_run``'s other keyword arguments may be passed and are ignored.
     """
     import time
