@@ -92,6 +92,11 @@ def check_hand_mutants(assignment: str, mutants: dict[str, dict[str, tuple[str, 
     assert not survivors, f"mutants the suite does not catch: {survivors}"
 
 
+_GRADERS: dict = {}
+"""One grader per assignment for this test process, as a batch's worker keeps one for all its submissions: a
+grading after the first skips the grader's start (its zygote's imports, the reference's trusted values)."""
+
+
 def graded_stubs(assignment: str, stubs: dict[str, str], path: Path) -> dict:
     """Grade ``assignment``'s solution notebook with ``stubs`` (name -> source) in place of those stub cells,
     written to ``path``: each stub's result by name (the grading must have a score)."""
@@ -99,10 +104,14 @@ def graded_stubs(assignment: str, stubs: dict[str, str], path: Path) -> dict:
     from autograder.core.grader import Grader
 
     nbformat.write(_with_stubs(assignment, stubs), str(path))
-    grader = Grader(assignment)
-    try:
-        result = grader.grade(path)
-    finally:
-        grader.close()
+    if assignment not in _GRADERS:
+        _GRADERS[assignment] = Grader(assignment)
+    result = _GRADERS[assignment].grade(path)
     assert result.has_score, result.error
     return {s.name: s for s in result.stubs}
+
+
+def pytest_sessionfinish(session, exitstatus) -> None:
+    """Close the graders :func:`graded_stubs` kept (their zygotes end with them)."""
+    while _GRADERS:
+        _GRADERS.popitem()[1].close()
