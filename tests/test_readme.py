@@ -97,3 +97,12 @@ def test_every_test_file_and_grader_module_a_page_names_exists(page):
         assert any(pattern.match(t) for t in tests), f"{page.relative_to(REPO)} names {name}, which is in neither tests/ nor a hidden suite"
     for module in set(re.findall(r"`(autograder/[\w/]+\.py)`", text)):
         assert (REPO / module).exists() or "suites/<id>" in module, f"{page.relative_to(REPO)} names {module}, which does not exist"
+
+
+def test_every_benchmark_script_has_a_row_in_docs_benchmarks():
+    """docs/benchmarks.md is where a contributor looks for how to run a benchmark: each script in bench/ has its row."""
+    table = (REPO / "docs" / "benchmarks.md").read_text()
+    scripts = sorted(p.name for p in (REPO / "bench").glob("bench_*.py"))
+    assert scripts, "no benchmark scripts found"
+    missing = [name for name in scripts if f"`{name}" not in table and f"bench/{name}" not in table]
+    assert not missing, f"docs/benchmarks.md has no row for {missing}"
