@@ -95,7 +95,7 @@ def expert_fraction(policy, expert_return: float, env_id: str, n_episodes: int, 
 def drift_run(train_bc, dagger, expert, env_id: str, demos, seed: int, expert_return: float, *,
               hidden=(16, 16), bc_demos=(1, 4, 12), bc_steps: int = 5000, dagger_iters: int = 8,
               dagger_episodes: int = 2, refit_steps: int = 1000, eval_episodes: int = 20, eval_seed: int = 1000,
-              batch_size: int = 256, lr: float = 1e-3, log=print) -> dict:
+              batch_size: int = 256, lr: float = 1e-3, keep_clone: bool = False, log=print) -> dict:
     """One training seed of hw1's drift protocol in one world (``env_id``); every fraction is of ``expert_return``.
 
     - behaviour cloning on the first ``k`` demonstrations for each ``k`` in ``bc_demos`` (``bc_steps``
@@ -109,7 +109,9 @@ def drift_run(train_bc, dagger, expert, env_id: str, demos, seed: int, expert_re
 
     Returns ``{"seed", "bc": [[labels, fraction], ...], "dagger": [[labels, fraction], ...]`` (the first
     DAgger point is the one-demonstration clone it starts from), ``"labels"`` (DAgger's final count),
-    ``"bc_matched"``, ``"dagger_final"``}. ``log`` gets one line per finished fit.
+    ``"bc_matched"``, ``"dagger_final"``}; with ``keep_clone``, also ``"matched_clone"``: that same-labels
+    clone itself, for :func:`dart_run` (pop it before saving the record as JSON). ``log`` gets one line per
+    finished fit.
     """
     import copy
     import time
@@ -140,6 +142,8 @@ def drift_run(train_bc, dagger, expert, env_id: str, demos, seed: int, expert_re
     n, m = len(obs), min(len(obs), len(demos.obs))  # m < n only when too few demonstrations were recorded
     matched = fit(demos.obs[:m], demos.actions[:m])
     out.update(labels=int(n), bc_labels=int(m), bc_matched=score(matched), dagger_final=out["dagger"][-1][1])
+    if keep_clone:
+        out["matched_clone"] = matched
     log(f"  seed {seed}: BC on the same {m} labels: {out['bc_matched']:.2f}; DAgger {out['dagger_final']:.2f} "
         f"({time.perf_counter() - start:.0f} s)")
     return out
@@ -262,13 +266,15 @@ def dart_demos(expert, env_id: str, cov: np.ndarray, n_labels: int, seed: int, b
 
 def dart_run(train_bc, expert, env_id: str, demos, seed: int, expert_return: float, labels: int, *,
              hidden=(16, 16), bc_steps: int = 5000, eval_episodes: int = 20, eval_seed: int = 1000,
-             batch_size: int = 256, lr: float = 1e-3, rescore_clone: bool = False, log=print, **_unused) -> dict:
+             batch_size: int = 256, lr: float = 1e-3, clone=None, rescore_clone: bool = False, log=print,
+             **_unused) -> dict:
     """One training seed of DART at ``labels`` expert labels (DAgger's final count in :func:`drift_run`).
 
     1. The noise: behaviour cloning on the first ``labels`` pairs of ``demos`` (exactly the clone that
        :func:`drift_run` compares with DAgger, same seed), and the second moment of its action errors on
        those pairs (:func:`action_error_moment`): the error a learner of this width makes after this many
-       clean labels, measured on data the practitioner has, never on returns.
+       clean labels, measured on data the practitioner has, never on returns. Pass that clone as ``clone``
+       (``drift_run(..., keep_clone=True)["matched_clone"]``) to use it rather than fit it again.
     2. ``labels`` pairs from the expert driving with that noise (:func:`dart_demos`, episodes seeded
        ``20_000 + 100 * seed``), labelled with its clean actions.
     3. A fresh learner fitted to them exactly as the clone was (``bc_steps`` steps, same seed), evaluated
@@ -286,7 +292,8 @@ def dart_run(train_bc, expert, env_id: str, demos, seed: int, expert_return: flo
     start = time.perf_counter()
     score = lambda policy: expert_fraction(policy, expert_return, env_id, eval_episodes, eval_seed)  # noqa: E731
     m = min(labels, len(demos.obs))
-    clone = fit_clone(train_bc, demos.obs[:m], demos.actions[:m], seed, bc_steps, hidden, batch_size, lr)
+    if clone is None:
+        clone = fit_clone(train_bc, demos.obs[:m], demos.actions[:m], seed, bc_steps, hidden, batch_size, lr)
     cov = action_error_moment(clone, demos.obs[:m], demos.actions[:m])
     data = dart_demos(expert, env_id, cov, labels, seed=20_000 + 100 * seed)
     learner = fit_clone(train_bc, data.obs, data.actions, seed, bc_steps, hidden, batch_size, lr)

@@ -183,3 +183,32 @@ def test_dart_results_agree_with_the_drift_results():
             "DART gets exactly DAgger's final labels, seed by seed"
         assert np.isclose(np.mean(s["dart"]), s["dart_mean"], atol=1e-3) and np.isclose(np.std(s["dart"]), s["dart_std"], atol=1e-3)
         assert len(s["noise_std"]) == len(s["noisy_expert"]) == len(s["bc_matched_again"]) == len(s["seeds"])
+
+
+def test_dart_run_on_drift_runs_own_clone_equals_fitting_it_again():
+    """The notebook hands ``drift_run``'s same-labels clone to ``dart_run`` rather than fit it a second time: in one
+    process the fit repeats exactly, so the DART record is the same, and the clone kept is the one scored."""
+    from autograder.core.grader import build_reference
+
+    ns = build_reference("hw1_imitation")
+    expert, env_id = _Linear(-0.5), drift.pushed_hopper(0.1)
+    from rlcourse.imitation import Demonstrations
+    from rlcourse.rollouts import rollout
+    demos = Demonstrations.from_episodes(rollout(expert.act, env_id, 2, seed=100, progress=False))
+    small = dict(hidden=(8, 8), bc_demos=(1,), bc_steps=40, dagger_iters=1, dagger_episodes=1, refit_steps=20,
+                 eval_episodes=2, eval_seed=1000)
+    run = drift.drift_run(ns["train_bc"], ns["dagger"], expert, env_id, demos, 0, 100.0, keep_clone=True,
+                          log=lambda *_: None, **small)
+    clone = run.pop("matched_clone")
+    assert np.isclose(drift.expert_fraction(clone, 100.0, env_id, 2, 1000), run["bc_matched"])
+    labels = min(run["labels"], len(demos.obs))
+    given = drift.dart_run(ns["train_bc"], expert, env_id, demos, 0, 100.0, labels, clone=clone,
+                           log=lambda *_: None, **small)
+    refitted = drift.dart_run(ns["train_bc"], expert, env_id, demos, 0, 100.0, labels, log=lambda *_: None, **small)
+    assert given == refitted, "the clone handed over must be the one dart_run would fit"
+    perfect = drift.dart_run(ns["train_bc"], expert, env_id, demos, 0, 100.0, labels, clone=expert,
+                             log=lambda *_: None, **small)
+    assert np.allclose(perfect["noise_cov"], 0.0) and not np.allclose(refitted["noise_cov"], 0.0), \
+        "the noise must come from the clone handed over (the expert itself errs by nothing)"
+    assert "matched_clone" not in drift.drift_run(ns["train_bc"], ns["dagger"], expert, env_id, demos, 0, 100.0,
+                                                  log=lambda *_: None, **small)
