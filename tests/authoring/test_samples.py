@@ -68,3 +68,24 @@ def test_the_worked_examples_mutants_lose_points_where_contributing_says(open_tm
     results = {r.submission: r for r in grade_folder("ex", folder, open_tmp / "out", jobs=2, progress=False)}
     got = {name: tuple(s.score for s in results[name].stubs) for name in MUTANTS}
     assert got == {name: want for name, (_, want) in MUTANTS.items()}
+
+
+def test_committed_samples_equal_a_fresh_regeneration():
+    """Every sample notebook is the current release with its stubs filled in (``python -m autograder samples ID``):
+    a sample left from an older release grades setup cells a student no longer has, and the demo proves nothing."""
+    import nbformat
+
+    from autograder.authoring.samples import make_samples
+
+    stale = []
+    for assignment in WITH_SAMPLES:
+        made = make_samples(assignment)
+        for name, (notebook, _) in made.items():
+            path = course.samples_dir(assignment) / f"{name}.ipynb"
+            if not path.exists() or [c.source for c in nbformat.read(str(path), as_version=4).cells] != \
+                    [c.source for c in notebook.cells]:
+                stale.append(f"{assignment}/{name}")
+        expected = json.loads((course.samples_dir(assignment) / "expected.json").read_text())
+        if expected != {name: outcome for name, (_, outcome) in made.items()}:
+            stale.append(f"{assignment}/expected.json")
+    assert not stale, f"samples out of date with the release: {stale}; run `python -m autograder samples ID`"
