@@ -42,7 +42,7 @@ test: setup
 test-fast: setup
 	$(PY) -m pytest -q -m "not slow" -n 2
 
-## Regenerate every student notebook from solutions/ with nbgrader.
+## Regenerate every student notebook from solutions/ with nbgrader, and the samples made from them.
 assignments: setup
 	$(PY) -m autograder assignments
 

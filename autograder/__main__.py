@@ -219,8 +219,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_assignments(args: argparse.Namespace) -> int:
     from autograder.authoring.release import generate_assignments
+    from autograder.authoring.samples import write_samples
+    from autograder.core import course
 
-    generate_assignments(args.ids or None)
+    ids = args.ids or course.assignment_ids()
+    generate_assignments(ids)
+    for assignment in ids:  # the samples are the release with its stubs filled in: kept in step with it
+        if (course.samples_dir(assignment) / "expected.json").exists():
+            write_samples(assignment)
+            print(f"regenerated {course.samples_dir(assignment)} (the samples `make demo` grades)")
     return 0
 
 
@@ -335,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--until-first-stub", action="store_true")
     p.add_argument("--output", type=Path, default=None, help="write the executed notebook here")
     p.set_defaults(fn=_cmd_run)
-    p = sub.add_parser("assignments", help="regenerate student notebooks")
+    p = sub.add_parser("assignments", help="regenerate student notebooks and the sample submissions made from them")
     p.add_argument("ids", nargs="*")
     p.set_defaults(fn=_cmd_assignments)
     p = sub.add_parser("student-release", help="build the student-only tree")

@@ -76,3 +76,24 @@ def test_a_solution_file_in_the_release_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(release.course, "STUDENT_RELEASE", (*release.course.STUDENT_RELEASE, "solutions"))
     with pytest.raises(SystemExit, match="leak"):
         build_student_release(tmp_path / "bad")
+
+
+def test_make_assignments_writes_the_samples_again_with_the_release(tmp_path):
+    """A solution edited and released with `make assignments` leaves no sample from the older release behind (the
+    demo would grade setup cells a student no longer has); an assignment without samples gets none."""
+    import shutil
+
+    from conftest import FIXTURE_COURSE
+
+    copy = tmp_path / "course"
+    shutil.copytree(FIXTURE_COURSE, copy)
+    shutil.copy(REPO / "nbgrader_config.py", copy / "nbgrader_config.py")  # the fixture's reaches up to it
+    complete = copy / "autograder/samples/ex/complete.ipynb"
+    fresh = complete.read_text()
+    complete.write_text(fresh.replace("import numpy as np", "import numpy as np  # an older release"))
+    env = {**os.environ, "RLCOURSE_REPO": str(copy), "PATH": f"{os.path.dirname(sys.executable)}:{os.environ['PATH']}"}
+    done = subprocess.run([sys.executable, "-m", "autograder", "assignments"], cwd=copy, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert complete.read_text() == fresh, "the sample was not written again from the release"
+    assert "samples/ex" in done.stdout and not (copy / "autograder/samples/fx").exists()
