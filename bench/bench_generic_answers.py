@@ -1,4 +1,4 @@
-"""Answers that know nothing of any stub, for every stub of every assignment at once: what they earn.
+"""Answers that know nothing of any stub, in every stub at once or in one stub at a time: what they earn.
 
     python bench/bench_generic_answers.py [--ids hw0_setup ...] [--record]
     python bench/bench_generic_answers.py --one-stub [--record]   # each stub alone, the rest solved (~15 min)
@@ -88,6 +88,7 @@ def main() -> int:
     import nbformat
 
     from autograder.core import course
+    from autograder.core.store import load_result
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--ids", nargs="*", help="assignments (default: every one with a hidden suite)")
@@ -118,17 +119,18 @@ def main() -> int:
         rows, earners = [], 0
         for (assignment, stub, answer, _), name in zip(cases, names):
             graded = out / assignment if len(ids) > 1 else out
-            result = json.loads((graded / name / "result.json").read_text())
-            earned = {s["name"]: [t["name"] for t in s["tests"] if t["passed"]]
-                      for s in result["stubs"] if s.get("score", 0) > 0 and stub in (None, s["name"])}
-            row = {"assignment": assignment, "answer": answer, "graded": result.get("error") is None,
-                   "score": result.get("score"), "max_score": result.get("max_score"), "earned": earned}
-            if stub:
-                row = {"assignment": assignment, "stub": stub, "answer": answer, "graded": row["graded"],
-                       "stub_score": next((s.get("score") for s in result["stubs"] if s["name"] == stub), None),
-                       "earned": earned}
-            rows.append(row)
-            earners += bool(earned) or result.get("error") is not None
+            result = load_result(graded / name)  # scores as the grader computes them (result.json holds tests only)
+            if result is None:
+                raise SystemExit(f"the batch left no readable result for {assignment}/{name}")
+            earned = {s.name: [t.name for t in s.tests if t.passed]
+                      for s in result.stubs if s.score > 0 and stub in (None, s.name)}
+            row = {"assignment": assignment, "answer": answer, "graded": result.has_score and not result.error}
+            if stub:  # the solved stubs' full marks are not the generic answer's
+                row.update(stub=stub, stub_score=next((s.score for s in result.stubs if s.name == stub), None))
+            else:
+                row.update(score=result.score, max_score=result.max_score)
+            rows.append({**row, "earned": earned})
+            earners += bool(earned) or not row["graded"]
     for row in rows:
         if row["earned"] or not row["graded"]:
             print(f"{row['assignment']} / {row.get('stub', 'every stub')} / {row['answer']}: {row['earned']}")
