@@ -88,4 +88,4 @@ def test_committed_samples_equal_a_fresh_regeneration():
         expected = json.loads((course.samples_dir(assignment) / "expected.json").read_text())
         if expected != {name: outcome for name, (_, outcome) in made.items()}:
             stale.append(f"{assignment}/expected.json")
-    assert not stale, f"samples out of date with the release: {stale}; run `python -m autograder samples ID`"
+    assert not stale, f"samples out of date with the release: {stale}; run `make assignments` (or `python -m autograder samples ID`)"

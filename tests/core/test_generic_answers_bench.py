@@ -18,8 +18,9 @@ def _bench():
 
 @pytest.mark.parametrize("mode", [[], ["--one-stub"]])
 def test_the_solution_passed_off_as_a_generic_answer_is_reported_as_earning(mode, monkeypatch, capsys):
-    """Each stub's own solution, called by the generic stub, must come out as earning (exit 1); zeros as earning
-    nothing (exit 0). Before this test the bench read a score that result.json does not hold and saw no earner."""
+    """Each stub's own solution, called by the generic stub, must be listed as earning (and the exit status 1); zeros
+    beside it must not be listed. Before this test the bench read a score that result.json does not hold and saw no
+    earner."""
     from autograder.authoring.samples import solution_sources
 
     bench = _bench()
