@@ -93,8 +93,9 @@ def check_hand_mutants(assignment: str, mutants: dict[str, dict[str, tuple[str, 
 
 
 _GRADERS: dict = {}
-"""One grader per assignment for this test process, as a batch's worker keeps one for all its submissions: a
-grading after the first skips the grader's start (its zygote's imports, the reference's trusted values)."""
+"""The last assignment's grader, kept for the next grading of the same assignment as a batch's worker keeps one for
+all its submissions (a grading after the first skips the zygote's imports and the reference's trusted values); one
+at a time, as the batch does, so that a worker does not hold a zygote per assignment."""
 
 
 def graded_stubs(assignment: str, stubs: dict[str, str], path: Path) -> dict:
@@ -105,6 +106,7 @@ def graded_stubs(assignment: str, stubs: dict[str, str], path: Path) -> dict:
 
     nbformat.write(_with_stubs(assignment, stubs), str(path))
     if assignment not in _GRADERS:
+        pytest_sessionfinish(None, None)  # the previous assignment's grader goes first
         _GRADERS[assignment] = Grader(assignment)
     result = _GRADERS[assignment].grade(path)
     assert result.has_score, result.error

@@ -18,6 +18,7 @@ import pytest
 from autograder.core import course
 from autograder.core.grader import Grader
 from autograder.authoring.samples import _with_stubs
+from conftest import graded_stubs
 
 pytestmark = pytest.mark.slow  # one grading per assignment: make test-fast leaves it out
 
@@ -42,31 +43,22 @@ def test_every_stub_has_a_trivial_answer(assignment):
 @pytest.fixture(scope="module", params=gradable_assignments())
 def assignment(request) -> str:
     """Each gradable assignment; module-scoped, so that pytest runs all of one assignment's tests together and
-    ``grader`` starts once per assignment for both of them."""
+    :func:`graded_stubs` keeps its grader for both of them."""
     return request.param
 
 
-@pytest.fixture(scope="module")
-def grader(assignment):
-    grader = Grader(assignment)
-    yield grader
-    grader.close()
-
-
-def _earned(grader: Grader, stubs: dict[str, str], path) -> dict[str, list[str]]:
+def _earned(assignment: str, stubs: dict[str, str], path) -> dict[str, list[str]]:
     """Grade the solution notebook with ``stubs`` in place of its stub cells: the tests passed, by stub that scored."""
-    nbformat.write(_with_stubs(grader.assignment, stubs), str(path))
-    result = grader.grade(path)
-    assert result.has_score, result.error
-    return {s.name: [t.name for t in s.tests if t.passed] for s in result.stubs if s.score > 0}
+    return {name: [t.name for t in s.tests if t.passed]
+            for name, s in graded_stubs(assignment, stubs, path).items() if s.score > 0}
 
 
-def test_trivial_answers_and_seed_search_earn_nothing(assignment, grader, open_tmp):
-    earned = _earned(grader, trivial_answers(assignment), open_tmp / f"trivial_{assignment}.ipynb")
+def test_trivial_answers_and_seed_search_earn_nothing(assignment, open_tmp):
+    earned = _earned(assignment, trivial_answers(assignment), open_tmp / f"trivial_{assignment}.ipynb")
     assert not earned, f"trivial answers earned points on {assignment}: {earned}"
 
 
-def test_stubs_that_always_raise_earn_nothing(assignment, grader, open_tmp):
+def test_stubs_that_always_raise_earn_nothing(assignment, open_tmp):
     """A stub that raises the error its contract asks for on bad input, whatever it is given, is a constant answer
     too: every test that checks a refusal also makes a call that must not raise. (The untouched stub's
     NotImplementedError is the samples' ``untouched``.)"""
@@ -74,7 +66,7 @@ def test_stubs_that_always_raise_earn_nothing(assignment, grader, open_tmp):
     stubs = {name: (f"class {name}:\n    def __init__(self, *args, **kwargs):\n        raise {error}('no')\n"
                     if name[:1].isupper() else f"def {name}(*args, **kwargs):\n    raise {error}('no')\n")
              for name in course.stub_names(assignment)}
-    earned = _earned(grader, stubs, open_tmp / f"raises_{assignment}.ipynb")
+    earned = _earned(assignment, stubs, open_tmp / f"raises_{assignment}.ipynb")
     assert not earned, f"stubs that always raise {error} earned points on {assignment}: {earned}"
 
 
