@@ -435,7 +435,7 @@ def position_swap(judge, a, b):
 
 
 
-@pytest.mark.parametrize("assignment", sorted(SHORTCUTS))
+@pytest.mark.parametrize("assignment", sorted(SHORTCUTS), scope="module")  # grouped by assignment: one grader each
 def test_shortcuts_lose_their_points(assignment, open_tmp):
     cases = SHORTCUTS[assignment]
     stubs = graded_stubs(assignment, {name: source for name, (source, _) in cases.items()}, open_tmp / "shortcuts.ipynb")
@@ -453,7 +453,7 @@ def test_shortcuts_lose_their_points(assignment, open_tmp):
                     f"{assignment}: the near miss for {name} passed {start!r}"
 
 
-@pytest.mark.parametrize("assignment", sorted(VARIANTS))
+@pytest.mark.parametrize("assignment", sorted(VARIANTS), scope="module")
 def test_allowed_variants_earn_full_marks(assignment, open_tmp):
     stubs = graded_stubs(assignment, VARIANTS[assignment], open_tmp / "variants.ipynb")
     for name in VARIANTS[assignment]:
