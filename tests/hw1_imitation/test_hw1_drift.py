@@ -212,3 +212,18 @@ def test_dart_run_on_drift_runs_own_clone_equals_fitting_it_again():
         "the noise must come from the clone handed over (the expert itself errs by nothing)"
     assert "matched_clone" not in drift.drift_run(ns["train_bc"], ns["dagger"], expert, env_id, demos, 0, 100.0,
                                                   log=lambda *_: None, **small)
+
+
+def test_the_protocols_push_calibration_is_quoted_from_the_results_file():
+    """Section 6 states what a push costs the expert with the figures ``--calibration`` recorded (20 episodes
+    of the protocol), not a figure from an unrecorded run: a re-measurement that changes them fails here."""
+    pushes = {p["push"]: p for p in json.loads(RESULTS.read_text())["drift"]["calibration"]["pushes"]}
+    calm, small, large = pushes[0.0], pushes[0.1], pushes[0.2]
+    want = [f"{small['fraction_of_calm']:.0%} of its calm return under pushes of 0.1",
+            f"({small['mean']:,.0f} ± {small['std']:,.0f} against {calm['mean']:,.0f} ± {calm['std']:,.0f})",
+            f"{large['fraction_of_calm']:.0%} under pushes of 0.2"]
+    for path in NOTEBOOKS:
+        cells = json.loads(path.read_text())["cells"]
+        text = re.sub(r"\s+", " ", " ".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown"))
+        for figure in want:
+            assert figure in text, f"{path.relative_to(REPO)}: section 6 should say {figure!r}"
