@@ -1,6 +1,7 @@
 """Benchmark of hw2 (maximum-entropy IRL): recovery, speed, and the `imitation` library's MCE-IRL.
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_hw2_maxent_irl.py [--seeds 5] [--imitation-seeds 2]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_hw2_maxent_irl.py [--seeds 5] [--imitation-seeds 2] [--record]
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_hw2_maxent_irl.py --sweep --record   # the notebook's sweep only
 
 Runs the solution notebook's stubs (taken from ``solutions/hw2_maxent_irl``) and prints Markdown tables:
 
@@ -14,7 +15,13 @@ Runs the solution notebook's stubs (taken from ``solutions/hw2_maxent_irl``) and
    course's gymnasium 1.4, so it runs in its own virtual environment (``--bench-python``, default
    ``.venv-bench/bin/python``) in a subprocess; the two sides exchange arrays through ``.npz`` files.
 
-The script is also its own worker: ``--imitation-worker IN OUT`` (used under the bench venv).
+4. ``--sweep``: the solution notebook's own data-efficiency sweep (Part B: the return ratio and the reward
+   correlation against the number of demonstrations, ``N_SEEDS`` seeds at the full budget), run by executing
+   the notebook up to that cell and reading its arrays, so the figures are the ones a student's full run
+   draws.
+
+``--record`` writes what ran into ``bench/results/hw2_maxent_irl.json`` (per seed), beside what was recorded
+before. The script is also its own worker: ``--imitation-worker IN OUT`` (used under the bench venv).
 """
 from __future__ import annotations
 
@@ -31,6 +38,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLUTION = ROOT / "solutions" / "hw2_maxent_irl" / "hw2_maxent_irl.ipynb"
+RESULTS = ROOT / "bench" / "results" / "hw2_maxent_irl.json"
+SWEEP_CELL = "82d3eb33"
+"""The id of the notebook's data-efficiency sweep cell (Part B), whose ``ratios`` and ``correlations`` --sweep reads."""
 
 
 def load_solution() -> dict:
@@ -142,6 +152,53 @@ def route_benchmark(ns: dict) -> dict:
             "loglik": float((feats[test] @ w - log_z).mean())}
 
 
+def notebook_sweep() -> dict:
+    """Run the solution notebook at its full budget up to its sweep cell and return the sweep's arrays."""
+    import nbformat
+
+    from autograder.authoring.nbrun import run_notebook
+
+    nb = nbformat.read(SOLUTION, as_version=4)
+    last = next(i for i, c in enumerate(nb.cells) if c.get("id") == SWEEP_CELL)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "sweep.json"
+        nb.cells = nb.cells[:last + 1] + [nbformat.v4.new_code_cell(
+            "import json\n"
+            f"open({str(out)!r}, 'w').write(json.dumps({{'demo_counts': list(DEMO_COUNTS), 'n_seeds': N_SEEDS, "
+            "'ratios': ratios.tolist(), 'correlations': correlations.tolist()}))")]
+        nb.cells[-1]["id"] = "bench-sweep-dump"
+        copy = Path(tmp) / SOLUTION.name
+        nbformat.write(nb, copy)
+        start = time.perf_counter()
+        report = run_notebook(copy, {"FAST": False}, timeout=1200, cwd=SOLUTION.parent)
+        if not report.ok:
+            sys.exit(f"the notebook failed before its sweep: {report.error}")
+        sweep = json.loads(out.read_text())
+    sweep["seconds"] = round(time.perf_counter() - start, 1)
+    ratios, corr = np.array(sweep["ratios"]), np.array(sweep["correlations"])
+    print(f"### The notebook's data-efficiency sweep ({sweep['n_seeds']} seeds, mean ± sd; per seed in the results)\n")
+    print("| demonstrations | return ratio | seeds above 1 | corr(learned, true reward) |")
+    print("|---|---|---|---|")
+    for j, n in enumerate(sweep["demo_counts"]):
+        print(f"| {n} | {ratios[:, j].mean():.3f} ± {ratios[:, j].std():.3f} | {(ratios[:, j] > 1).sum()} of "
+              f"{len(ratios)} | {corr[:, j].mean():.3f} ± {corr[:, j].std():.3f} |")
+    return sweep
+
+
+def record(**parts) -> None:
+    """Merge ``parts`` into the results file, each stamped with the run's commit, date and load."""
+    sys.path.insert(0, str(ROOT))
+    from bench.run_record import meta
+
+    results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    stamp = meta()
+    for key, value in parts.items():
+        results[key] = {**value, "meta": stamp}
+    results["meta"] = stamp
+    RESULTS.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {RESULTS.relative_to(ROOT)}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
@@ -149,9 +206,16 @@ def main() -> None:
                         help="how many of the seeds imitation also runs (about 2-3 minutes each here)")
     parser.add_argument("--bench-python", default=str(ROOT / ".venv-bench" / "bin" / "python"))
     parser.add_argument("--imitation-worker", nargs=2, metavar=("IN", "OUT"))
+    parser.add_argument("--sweep", action="store_true", help="only the notebook's data-efficiency sweep")
+    parser.add_argument("--record", action="store_true", help=f"write the results into {RESULTS.relative_to(ROOT)}")
     args = parser.parse_args()
     if args.imitation_worker:
         imitation_worker(*args.imitation_worker)
+        return
+    if args.sweep:
+        sweep = notebook_sweep()
+        if args.record:
+            record(sweep=sweep)
         return
     import torch
 
@@ -195,6 +259,12 @@ def main() -> None:
     print(f"| {routes['seconds']:.1f} | {routes['overlap']:.3f} | {routes['shortest']:.3f} | {routes['loglik']:.2f} |")
     print(f"\nmachine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
+    if args.record:
+        keep = ("gap", "corr", "ratio", "seconds", "iterations")
+        recovery = {"seeds": args.seeds, "course": [{k: float(r[k]) for k in keep} for r in ours],
+                    "imitation": theirs if isinstance(theirs, str) else
+                    [{k: float(r[k]) for k in keep} for r in rows]}
+        record(recovery=recovery, routes={k: float(v) for k, v in routes.items()})
 
 
 if __name__ == "__main__":

@@ -565,10 +565,10 @@ def index(results: Path, names: list[str], data: dict[str, Any], experts: bool =
     if silent:
         blocks += ["Benchmarks that print their tables but record no results file yet, so no page shows their "
                    "figures; run one to measure them on your machine: " + ", ".join(f"`python bench/{b}`" for b in silent) + "."]
-    blocks += ["Measured by other commands, and recorded by none of these files yet: the hidden suites' mutation "
-               "scores (`make mutants ID=<id>` writes `build/mutants/<id>/report.md`), a notebook's run time "
-               "(`python -m autograder run solutions/<id>/<id>.ipynb`, with `-p FAST=True` for the quick path, under "
-               "`/usr/bin/time -v`), and the whole test suite's (`time make test`)."]
+    blocks += ["Measured by other commands and recorded here too: the hidden suites' mutation scores "
+               "([mutants](mutants.md); `make mutants ID=<id>` writes one assignment's report to "
+               "`build/mutants/<id>/report.md`), each notebook's run time ([notebook_budgets](notebook_budgets.md)), "
+               "and the whole test suite's ([make_test](make_test.md), [test_fast](test_fast.md))."]
     return "\n\n".join(blocks) + "\n"
 
 
