@@ -538,9 +538,13 @@ class Session(Transport):
         except (ChannelClosed, BrokenPipeError, OSError):
             tail = self.worker.tail().strip()
             self.worker.kill()
-            if self.worker.over_memory:
+            if self.worker.over_limit == "memory":
                 raise SandboxFailure(f"used more than {self.limits.memory_bytes / 2**30:.3g} GB of memory, counting "
                                      "every process it started, and was stopped") from None
+            if self.worker.over_limit == "cpus":
+                raise SandboxFailure("kept several processes or threads computing at once, and was stopped: a "
+                                     "submission has one CPU, which its code must not share out (the machine "
+                                     "grades others beside it)") from None
             raise SandboxFailure("crashed the sandbox (the process exited or was killed: out of memory, "
                                  "os._exit, a signal, or a resource limit)"
                                  + (f"; its last output: {tail[-TAIL_QUOTED:]}" if tail else "")) from None

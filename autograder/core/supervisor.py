@@ -22,7 +22,7 @@ import time
 from dataclasses import asdict
 from typing import Any
 
-from autograder.core.memory import MemoryGuard
+from autograder.core.tree_guard import TreeGuard
 from autograder.sandbox.config import ZYGOTE_READY, SpawnConfig, safe_environment
 from autograder.sandbox.isolation import PR_SET_DUMPABLE, libc
 from autograder.sandbox.wire import MAX_MESSAGE_BYTES, FrameReader, send_message
@@ -120,7 +120,7 @@ class WorkerProcess:
         os.set_blocking(from_fd, False)
         self.to_fd, self.reader, self.out_fd = to_fd, FrameReader(from_fd, max_message), out_fd
         self.memory_bytes = memory_bytes
-        self.guard: MemoryGuard | None = None
+        self.guard: TreeGuard | None = None
         self._schedstat: int | None = None  # /proc/PID/schedstat, kept open: a pread is a tenth of an open and read
         self.final_schedstat: tuple[int, int] | None = None
         """The worker's (CPU ns, run-delay ns) as it was killed, for accounts that outlive it."""
@@ -148,7 +148,7 @@ class WorkerProcess:
         header, _ = self.reader.read_message(deadline=deadline)
         self.pid, self.pgid, self.isolation = header.get("pid"), header.get("pgid"), header.get("isolation")
         if self.memory_bytes and isinstance(self.pgid, int) and self.pgid > 1:  # the launcher leads the group
-            self.guard = MemoryGuard(self.pgid, self.memory_bytes, self._signal_tree)  # the grader's thread closes
+            self.guard = TreeGuard(self.pgid, self.memory_bytes, self._signal_tree)  # the grader's thread closes
         ready, _ = self.reader.read_message(deadline=deadline)
         if not ready.get("ok"):
             raise SandboxStartError(ready.get("error", "the sandbox failed to start"))
@@ -182,9 +182,10 @@ class WorkerProcess:
         return self.reader.read_message(deadline=deadline)
 
     @property
-    def over_memory(self) -> bool:
-        """Whether the guard killed the worker's tree for holding more than its memory limit."""
-        return self.guard is not None and self.guard.exceeded
+    def over_limit(self) -> str | None:
+        """Why the guard killed the worker's tree: "memory" (it held more than its limit), "cpus" (it kept
+        several tasks busy at once), or None."""
+        return None if self.guard is None else self.guard.exceeded
 
     def tail(self) -> str:
         return bytes(self.output[-TAIL_CHARS:]).decode("utf-8", "replace")

@@ -109,6 +109,8 @@ def _launch(config: SpawnConfig, fds: list[int], zygote: int | None = None) -> N
     os.setsid()
     isolation.libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)  # orphans of the worker's tree stay under this one
     level = isolation.enter_namespaces()
+    if level != "none":
+        isolation.close_ipc()
     _die_with_parent(zygote)
     uid = WORKER_UID_BASE + os.getpid() % WORKER_UID_SPAN
     existing = isolation.processes_of(os.getuid())  # counted before the worker's /proc shows only its own namespace

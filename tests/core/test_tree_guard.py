@@ -1,0 +1,178 @@
+"""The sandbox's memory and CPUs are capped for its whole process tree, not per process (issue 35; the CPUs, the
+shared memory and System V IPC after a red-team batch in which one submission's busy loops cost a classmate
+points)."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from autograder.core import tree_guard
+from autograder.sandbox.config import Limits
+from conftest import FIXTURE_COURSE, with_cells
+
+FORK_AND_HOLD = '''
+import os, time
+def scaled_sum(x):
+    for _ in range(6):
+        if os.fork() == 0:
+            held = bytearray(300 * 2**20)   # touched: zero-filled
+            time.sleep(60)
+            os._exit(0)
+    time.sleep(20)
+    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)
+'''
+
+
+def test_tree_bytes_counts_every_descendant():
+    code = ("import os, time\nheld = bytearray(64 * 2**20)\n"
+            "for _ in range(2):\n    if os.fork() == 0:\n        more = bytearray(64 * 2**20)\n        time.sleep(30)\n"
+            "print('ready', flush=True)\ntime.sleep(30)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == b"ready"
+        time.sleep(0.3)
+        assert len(tree_guard.tree(proc.pid)) == 3
+        held = tree_guard.tree_bytes(proc.pid)
+        assert 3 * 64 * 2**20 <= held < 3 * 64 * 2**20 + 200 * 2**20, held
+        assert tree_guard.private_bytes(proc.pid) < held - 100 * 2**20, "the children are counted too"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def _grade_fx(tmp_path, monkeypatch, code: str, **limits):
+    """Grade the fixture course's solution with ``scaled_sum`` replaced by ``code``: (stubs by name, seconds, the
+    worker's isolation level)."""
+    from autograder.core import course
+    from autograder.core.grader import Grader
+
+    monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
+    grader = Grader("fx", limits=Limits(call_seconds=30, test_seconds=60, exec_seconds=10, submission_seconds=120,
+                                        **limits))
+    try:
+        nb = with_cells(FIXTURE_COURSE / "solutions/fx/fx.ipynb", tmp_path / "probe.ipynb", {"scaled_sum": code})
+        start = time.monotonic()
+        result = grader.grade(nb)
+        seconds = time.monotonic() - start
+    finally:
+        grader.close()
+    assert result.status == "graded", result.notes
+    return {s.name: s for s in result.stubs}, seconds, result.isolation
+
+
+def _stopped_for(stubs, words: str) -> None:
+    assert stubs["scaled_sum"].score == 0
+    assert any(words in t.message for t in stubs["scaled_sum"].tests), [t.message for t in stubs["scaled_sum"].tests]
+    assert stubs["mean_of"].score == stubs["mean_of"].max_score, "the next stub is graded in a fresh worker"
+
+
+@pytest.mark.slow
+def test_forked_children_together_cannot_pass_the_limit(tmp_path, monkeypatch):
+    stubs, seconds, _ = _grade_fx(tmp_path, monkeypatch, FORK_AND_HOLD, memory_bytes=int(1.5 * 2**30))
+    _stopped_for(stubs, "GB of memory, counting every process")
+    assert seconds < 60, "the tree is stopped when it passes the limit, not when its call times out"
+
+
+SHARED_AND_MEMORY_FILES = '''
+import mmap, os, time
+def scaled_sum(x):
+    if os.fork() == 0:  # shared anonymous memory: resident, but "shared" to a count of resident - shared pages
+        m = mmap.mmap(-1, 600 * 2**20)
+        for _ in range(600):
+            m.write(b"x" * 2**20)
+        time.sleep(60)
+        os._exit(0)
+    files = []
+    for i in range(60):  # memory files held open, mapped by no one: in no process's resident memory at all
+        fd = os.memfd_create(f"held{i}")
+        os.write(fd, b"x" * (15 * 2**20))
+        files.append(fd)
+    time.sleep(20)
+    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)
+'''
+
+
+@pytest.mark.slow
+def test_shared_memory_and_memory_files_count_against_the_limit(tmp_path, monkeypatch):
+    """600 MB of shared anonymous memory in a child and 900 MB in memory files held open, against a 1.2 GB cap:
+    before, the guard saw neither (the red team held 7.4 GB under a 4 GB cap)."""
+    stubs, seconds, _ = _grade_fx(tmp_path, monkeypatch, SHARED_AND_MEMORY_FILES, memory_bytes=int(1.2 * 2**30))
+    _stopped_for(stubs, "GB of memory, counting every process")
+    assert seconds < 40
+
+
+def test_memory_files_and_shared_mappings_are_counted():
+    code = ("import mmap, os, time\nm = mmap.mmap(-1, 96 * 2**20)\nm.write(b'\\1' * len(m))\n"
+            "fd = os.memfd_create('held')\nos.write(fd, b'\\1' * (80 * 2**20))\n"
+            "print('ready', flush=True)\ntime.sleep(30)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == b"ready"
+        assert tree_guard.private_bytes(proc.pid) >= 96 * 2**20, "the shared mapping"
+        assert tree_guard.memory_file_bytes([proc.pid]) >= 80 * 2**20, "the memory file nothing maps"
+        assert tree_guard.tree_bytes(proc.pid) >= 176 * 2**20
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def test_busy_tasks_counts_processes_and_threads_that_want_a_cpu():
+    code = ("import os, threading, time\n"
+            "for _ in range(2):\n    if os.fork() == 0:\n        while True: pass\n"
+            "threading.Thread(target=time.sleep, args=(30,), daemon=True).start()\n"
+            "print('ready', flush=True)\ntime.sleep(30)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == b"ready"
+        time.sleep(0.2)
+        pids = tree_guard.tree(proc.pid)
+        looks = [tree_guard.busy_tasks(pids) for _ in range(20)]
+        assert max(looks) == 2 and min(looks) >= 1, looks  # two loops; the sleeping parent and thread are not busy
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+BUSY_LOOPS = '''
+import subprocess, time
+def scaled_sum(x):
+    for _ in range(4):  # each in a session of its own, as the red team's were
+        subprocess.Popen(["/bin/sh", "-c", "while :; do :; done"], start_new_session=True)
+    time.sleep(20)
+    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)
+'''
+
+
+@pytest.mark.slow
+def test_a_tree_that_keeps_several_cpus_busy_is_stopped(tmp_path, monkeypatch):
+    """Four busy loops started by a stub that then waits: the tree is stopped within seconds, well before the
+    test's time limit, and the next stub is graded in a fresh worker."""
+    stubs, seconds, _ = _grade_fx(tmp_path, monkeypatch, BUSY_LOOPS)
+    _stopped_for(stubs, "several processes or threads computing at once")
+    assert seconds < 30
+
+
+SYSTEM_V_SEGMENT = '''
+import ctypes
+def scaled_sum(x):
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.shmget(0, ctypes.c_size_t(2**20), 0o1600) < 0:
+        raise OSError(ctypes.get_errno(), "no segment")
+    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)
+'''
+
+
+@pytest.mark.slow
+def test_no_system_v_shared_memory_in_a_namespace(tmp_path, monkeypatch):
+    """A System V segment keeps its memory when every process has unmapped it, out of the guard's sight: in its
+    own IPC namespace the worker may create none (where there are no namespaces, there is nothing to close)."""
+    stubs, _, isolation = _grade_fx(tmp_path, monkeypatch, SYSTEM_V_SEGMENT)
+    if isolation == "none":
+        pytest.skip("no namespaces here (isolation 'none'): the worker shares the machine's IPC")
+    messages = [t.message for t in stubs["scaled_sum"].tests]
+    assert stubs["scaled_sum"].score == 0 and any("no segment" in m for m in messages), messages
