@@ -27,7 +27,7 @@ PARAMETERS_TAG, SETUP_TAG = "parameters", "setup"
 @dataclass
 class StubMatch:
     source: str
-    how: str  # "grade_id" or "name"
+    how: str  # "grade_id", "name" (no cell had the stub's grade_id) or "below" (a later cell redefined it)
     problem: str = ""
     """Why the matched cell cannot be run (see :class:`autograder.core.intake.CodeCell`), or empty."""
 
@@ -77,28 +77,31 @@ def code_cells(nb: SubmittedNotebook | nbformat.NotebookNode) -> list[CodeCell]:
 def find_stubs(nb: SubmittedNotebook | nbformat.NotebookNode, expected: list[str]) -> tuple[dict[str, StubMatch], list[str]]:
     """Match each expected stub to a code cell: by ``grade_id``, else by the name the cell defines.
 
-    When several cells match, the last one wins, as it would when the notebook runs top to bottom.
+    When several cells match, the last one wins, as it would when the notebook runs top to bottom: an answer
+    written in a new cell below an untouched stub is the answer (and a note says so).
     ``nb`` is what :func:`autograder.core.intake.read_code_cells` returns (grading), or a notebook from
     :func:`read_submission`.
     """
-    by_id: dict[str, StubMatch] = {}
-    by_name: dict[str, StubMatch] = {}
-    notes: list[str] = []
+    found: dict[str, StubMatch] = {}
+    below: set[str] = set()  # stubs last defined by a cell below their own
     for cell in code_cells(nb):
         if cell.grade_id in expected:
-            by_id[cell.grade_id] = StubMatch(cell.source, "grade_id", cell.problem)
+            found[cell.grade_id] = StubMatch(cell.source, "grade_id", cell.problem)
+            below.discard(cell.grade_id)
             continue
         for name in cell.defines:
             if name in expected:
-                by_name[name] = StubMatch(cell.source, "name", cell.problem)
-    found = {}
+                if name in found and found[name].how == "grade_id":
+                    below.add(name)
+                found[name] = StubMatch(cell.source, "name" if name not in below else "below", cell.problem)
+    notes = []
     for name in expected:
-        if name in by_id:
-            found[name] = by_id[name]
-        elif name in by_name:
-            found[name] = by_name[name]
+        if name in below:
+            notes.append(f"`{name}` was taken from a cell below its own stub cell that defines it again, as running "
+                         "the notebook top to bottom would use that one")
+        elif name in found and found[name].how == "name":
             notes.append(f"`{name}` was found by the name it defines (its cell's grading metadata was missing or changed)")
-    return found, notes
+    return {name: found[name] for name in expected if name in found}, notes
 
 
 @dataclass

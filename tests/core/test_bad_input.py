@@ -109,3 +109,28 @@ def test_old_format_3_notebooks_are_converted(grader, tmp_path):
     result = grader.grade(path)
     assert {s.name: s.score for s in result.stubs}["mean_of"] == 1
     assert any("format 3" in note for note in result.notes)
+
+
+def test_an_answer_in_a_new_cell_below_the_untouched_stub_is_the_answer(grader, tmp_path):
+    """Students often leave the stub cell as released and write the function again in a cell below; the
+    notebook, run top to bottom, uses the later one, so the grader does too, and says where it took it from.
+    A definition *above* the untouched stub is not the answer: running the notebook, the stub replaces it."""
+    solved = nbformat.read(str(solved_copy(tmp_path)), as_version=4)
+    answer = next(c.source for c in solved.cells if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == "mean_of")
+    release = nbformat.read(str(RELEASE), as_version=4)
+    stub_at = next(i for i, c in enumerate(release.cells)
+                   if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == "mean_of")
+
+    def graded(position: int) -> dict:
+        nb = nbformat.read(str(RELEASE), as_version=4)
+        nb.cells.insert(position, nbformat.v4.new_code_cell(answer))
+        path = tmp_path / f"answer_at_{position}.ipynb"
+        nbformat.write(nb, str(path))
+        result = grader.grade(path)
+        return {"stub": {s.name: s for s in result.stubs}["mean_of"], "notes": result.notes}
+
+    below = graded(stub_at + 1)
+    assert below["stub"].score == below["stub"].max_score > 0
+    assert any("below its own stub cell" in note for note in below["notes"]), below["notes"]
+    above = graded(stub_at)
+    assert above["stub"].score == 0 and not any("below its own stub cell" in n for n in above["notes"])
