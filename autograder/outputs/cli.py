@@ -34,8 +34,12 @@ def _course(p: argparse.ArgumentParser) -> None:
 def _cmd_sync(args: argparse.Namespace) -> int:
     from autograder.outputs.gradebook import course_directory, sync
 
+    import sys
+
     report = sync(args.assignment, args.folder, args.results, args.course)
     print("\n".join(report.lines(args.assignment, course_directory(args.course).db_url)))
+    for line in report.warnings():
+        print(line, file=sys.stderr)
     return 0
 
 

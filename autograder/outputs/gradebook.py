@@ -7,8 +7,11 @@ nbgrader-sync ID FOLDER --results DIR``) writes, through ``nbgrader.api.Gradeboo
   stub (``cell_type`` code, worth the points its hidden tests carry) and for each written
   answer (markdown, worth its nbgrader ``points``), each also a solution cell so a grader can
   leave a comment on it;
-- per submission: the student (the submission's name; for a Gradescope export, each submitter
-  named in ``submission_metadata.yml``), the submission with its time when the layout records
+- per submission: the student (the name the submission was handed in under, its folder's name in
+  ``submitted/`` or its notebook's stem, not the safe name ``batch`` filed it under: see
+  :func:`submission_ids`; for a Gradescope export, each submitter named in ``submission_metadata.yml``;
+  an id that cannot be a folder name as it is, such as one with a control character, is recorded under
+  its safe name and named in a warning), the submission with its time when the layout records
   one (nbgrader's ``timestamp.txt``, Gradescope's ``:created_at:``), the autograder's score of
   each stub as the grade's ``auto_score`` and the tests' outcomes as its ``auto_comment``;
   a written answer left as released (or a submission with no notebook) gets ``auto_score`` 0,
@@ -34,6 +37,7 @@ import json
 import os
 import re
 import sys
+import unicodedata
 import warnings
 from dataclasses import dataclass, field
 from html.parser import HTMLParser
@@ -42,7 +46,7 @@ from pathlib import Path
 import nbformat
 
 from autograder.core import course
-from autograder.core.batch import Entry, discover, unique_safe_names
+from autograder.core.batch import Entry, discover, safe_name, submissions_folder
 from autograder.core.notebook import NotebookError, find_stubs, manual_cells, read_notebook, read_submission
 from autograder.outputs.batch_output import STUDENTS_NAME, read_results, read_students
 from autograder.core.store import atomic_write
@@ -83,6 +87,8 @@ class SyncReport:
     """Scores and comments given by a person, left as they were."""
     waiting: int = 0
     """Written answers that wait for a person's grade."""
+    unusable_ids: list[tuple[str, str, str]] = field(default_factory=list)
+    """``(student id, id recorded instead, why)`` for each student id that cannot be a gradebook id as it is."""
 
     def lines(self, assignment: str, gradebook: str) -> list[str]:
         out = [f"{assignment}: {len(self.recorded)} submission(s) recorded in {gradebook}, "
@@ -90,6 +96,12 @@ class SyncReport:
                f"grade; {self.kept} score(s) or comment(s) given by a person kept as they were"]
         out += [f"  not recorded: {name}: {why}" for name, why in self.skipped]
         return out
+
+    def warnings(self) -> list[str]:
+        """What the instructor must act on, one line each (the command prints them on stderr)."""
+        return [f"warning: student id {ascii(raw)} {why}, so it was recorded as {ascii(used)}, which matches no "
+                f"roster entry: rename the student's folder (or their id in the roster), then sync again"
+                for raw, used, why in self.unusable_ids]
 
 
 # ------------------------------------------------------------------ the nbgrader course
@@ -169,6 +181,48 @@ def keep_names(gb, person: Submitter) -> None:
         gb.update_or_create_student(person.student_id, **empty)
 
 
+def id_problem(student_id: str) -> str | None:
+    """Why ``student_id`` cannot be a gradebook id and a folder name of ``autograded/`` as it is, or None."""
+    try:
+        student_id.encode("utf-8")
+    except UnicodeEncodeError:
+        return "is not valid UTF-8"
+    if not student_id or student_id in (".", "..") or "/" in student_id:
+        return "is not a folder name"
+    if any(unicodedata.category(c) in ("Cc", "Cf", "Cs", "Co", "Cn") for c in student_id):
+        return "holds control or unassigned characters"
+    if student_id != student_id.strip():
+        return "begins or ends with white space"
+    return None
+
+
+def submission_ids(folder: Path) -> dict[str, str]:
+    """Per submission name as ``batch`` makes it (``safe_name``), the name it was made from: the student's folder
+    name in nbgrader's layout, a notebook's stem in a flat folder. The student id is that name, not the safe one
+    (``Mallory Smith``, not ``Mallory_Smith+4daf2c6d``): it is the id in the roster and in ``submitted/``."""
+    try:
+        root = submissions_folder(Path(folder))
+        children = list(root.iterdir())
+    except (SystemExit, OSError):
+        return {}
+    out: dict[str, str] = {}
+    for child in children:
+        for name in (child.name, child.stem):
+            out.setdefault(safe_name(name), name)
+    return out
+
+
+def _student_id(raw: str, report: SyncReport) -> str:
+    """``raw`` as the gradebook's student id; when it cannot be one, its safe name, and a warning naming both."""
+    why = id_problem(raw)
+    if why is None:
+        return raw
+    used = safe_name(raw)
+    if (raw, used, why) not in report.unusable_ids:
+        report.unusable_ids.append((raw, used, why))
+    return used
+
+
 # ------------------------------------------------------------------ what the assignment holds
 
 def written_answers(assignment: str) -> list[WrittenAnswer]:
@@ -216,7 +270,7 @@ def register_assignment(gb, assignment: str, stubs: dict[str, float], written: l
 
 def gradescope_submitters(folder: Path) -> dict[str, tuple[list[Submitter], str | None]]:
     """From a Gradescope export's ``submission_metadata.yml``: per submission folder, its submitters
-    (student id: the SID, else the e-mail, made path-safe) and its ``:created_at:`` time."""
+    (student id: the SID, else the e-mail, as written there) and its ``:created_at:`` time."""
     import yaml
 
     path = Path(folder) / GRADESCOPE_METADATA
@@ -236,7 +290,7 @@ def gradescope_submitters(folder: Path) -> dict[str, tuple[list[Submitter], str 
             if raw:
                 full = str(person.get(":name") or "").strip()
                 first, _, last = full.rpartition(" ") if " " in full else ("", "", full)
-                people.append(Submitter(unique_safe_names([raw])[0], first or None, last or None,
+                people.append(Submitter(raw, first or None, last or None,
                                         str(person.get(":email") or "") or None))
         created = record.get(":created_at")
         out[str(name)] = (people, str(created) if created else None)
@@ -489,12 +543,18 @@ def record_submission(gb, assignment: str, student: str, result: GradeResult, st
     gb.db.commit()
 
 
-def _submitters(entries: list[Entry], folder: Path) -> dict[str, tuple[list[Submitter], str | None]]:
+def _submitters(entries: list[Entry], folder: Path, report: SyncReport
+                ) -> dict[str, tuple[list[Submitter], str | None]]:
+    """Per submission, its students (ids as the course knows them: see :func:`submission_ids`) and its time."""
     gradescope = gradescope_submitters(folder)
+    original = submission_ids(folder)
     out = {}
     for entry in entries:
         people, created = gradescope.get(entry.name, ([], None))
-        out[entry.name] = (people or [Submitter(entry.name)], created or nbgrader_timestamp(entry, folder))
+        people = people or [Submitter(original.get(entry.name, entry.name))]
+        for person in people:
+            person.student_id = _student_id(person.student_id, report)
+        out[entry.name] = (people, created or nbgrader_timestamp(entry, folder))
     return out
 
 
@@ -509,8 +569,8 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
     stubs = stub_points(assignment, list(results.values()))
     written = written_answers(assignment)
     coursedir = course_directory(course_root)
-    people = _submitters(list(entries.values()), folder)
     report = SyncReport()
+    people = _submitters(list(entries.values()), folder, report)
     students: dict[str, list[str]] = {}
     failed: dict[str, str] = {}
     with open_gradebook(coursedir) as gb:

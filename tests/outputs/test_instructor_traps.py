@@ -1,0 +1,62 @@
+"""Traps an instructor met in a trial term (their notes: T2-T6, T11), each as the outputs now behave.
+
+Fast tests on the fixture course's assignment ``fx`` (stubs worth 3, 2, 1 and 1 points, a written answer
+``q_why`` worth 2), with results written as ``batch`` writes them and grades given through
+``nbgrader.api.Gradebook`` as formgrader's score box writes them.
+"""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import nbformat
+
+from autograder.core.batch import safe_name
+from autograder.outputs import export, feedback, gradebook
+from autograder.outputs.files import write_outputs
+from test_term import POINTS, empty_gradebook, graded, grades_of, give, new_course, submission  # noqa: F401
+
+
+# ------------------------------------------------------------------ T2: a student id that is not a plain name
+
+def test_a_student_id_with_a_space_is_recorded_and_exported_under_that_id(fixture_course, tmp_path, new_course):
+    root = new_course
+    with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:  # the roster, as nbgrader imports it
+        gb.add_student("Mallory Smith", first_name="Mallory", last_name="Smith", lms_user_id="1012")
+        gb.add_student("alice", first_name="Alice", last_name="Adams", lms_user_id="1001")
+    (root / "roster.csv").write_text("id,first_name,last_name,lms_user_id\nMallory Smith,Mallory,Smith,1012\n"
+                                     "alice,Alice,Adams,1001\n")
+    folder, out = tmp_path / "submitted", tmp_path / "results"  # nbgrader's layout: submitted/<student>/fx/
+    submission(folder / "Mallory Smith" / "fx" / "fx.ipynb", "Because.")
+    submission(folder / "alice" / "fx" / "fx.ipynb", "Because.")
+    safe = safe_name("Mallory Smith")
+    assert safe != "Mallory Smith", "the batch's folder name is the id made safe"
+    write_outputs(graded(safe, {"scaled_sum", "Counter"}), out / safe)
+    write_outputs(graded("alice", set(POINTS)), out / "alice")
+
+    report = gradebook.sync("fx", folder, out, root)
+    assert sorted(s for _, s in report.recorded) == ["Mallory Smith", "alice"]
+    with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
+        assert sorted(s.id for s in gb.students) == ["Mallory Smith", "alice"], "no new student under the safe name"
+    assert grades_of(root, "Mallory Smith")["Counter"] == (2, None, False)
+    assert (root / "autograded" / "Mallory Smith" / "fx" / "fx.ipynb").is_file()
+    assert json.loads((out / "_students.json").read_text())[safe] == ["Mallory Smith"]
+
+    give(root, "Mallory Smith", "q_why", 1.0)
+    export.export(tmp_path / "canvas.csv", root, fmt="canvas")
+    rows = {r[0]: r for r in csv.reader((tmp_path / "canvas.csv").open())}
+    assert rows["Smith, Mallory"][1] == "1012" and rows["Smith, Mallory"][-1] == "6"
+    assert len(rows) == 2 + 2, "a header, Points Possible and one row per roster student: no unmatchable row"
+    done = feedback.write_feedback("fx", out, root)
+    assert root / "feedback" / "Mallory Smith" / "fx" / "feedback.md" in done.written
+
+
+def test_a_student_id_that_cannot_be_a_gradebook_id_is_named_in_a_warning(fixture_course, tmp_path, new_course):
+    folder, out = tmp_path / "submitted", tmp_path / "results"
+    raw = "eve\tx"  # a tab: no folder of autograded/ should carry it
+    submission(folder / raw / "fx" / "fx.ipynb")
+    write_outputs(graded(safe_name(raw), set()), out / safe_name(raw))
+    report = gradebook.sync("fx", folder, out, new_course)
+    assert [s for _, s in report.recorded] == [safe_name(raw)]
+    assert len(report.warnings()) == 1 and "'eve\\tx'" in report.warnings()[0] and safe_name(raw) in report.warnings()[0]
