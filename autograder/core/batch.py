@@ -74,6 +74,49 @@ class Entry:
     problem: str = ""
     missing: bool = False
     """nbgrader's layout, and the student's folder lacks this assignment: not a submission at all."""
+    handed_in: Path | None = None
+    """Where a submission with nothing to grade (``problem``) was found, to notice when it changes."""
+
+    def digest(self) -> str:
+        """What this entry holds now, as a result records it (``notebook_sha256``): the notebook's digest, or for a
+        submission with nothing to grade, ``folder:`` and a digest of what it holds."""
+        if self.notebook is not None:
+            return _digest(self.notebook)
+        return "folder:" + _contents_digest(self.handed_in) if self.handed_in is not None else ""
+
+
+def _contents_digest(path: Path, limit: int = 1000) -> str:
+    """A digest of what ``path`` holds (names, kinds, sizes and the bytes of regular files), no link followed."""
+    digest = hashlib.sha256()
+    try:
+        top = os.lstat(path)
+    except OSError:
+        return ""
+    items = [(path, top)]
+    if stat.S_ISDIR(top.st_mode):
+        for folder, dirs, files in os.walk(path, followlinks=False):
+            dirs.sort()
+            for name in sorted(dirs + files):
+                try:
+                    items.append((Path(folder) / name, os.lstat(Path(folder) / name)))
+                except OSError:
+                    pass
+            if len(items) > limit:
+                break
+    for item, st in items[:limit]:
+        digest.update(f"{item.relative_to(path)}\0{stat.S_IFMT(st.st_mode)}\0{st.st_size}\0".encode("utf-8", "surrogateescape"))
+        if stat.S_ISREG(st.st_mode) and st.st_size <= MAX_DIGESTED_BYTES:
+            try:
+                digest.update(notebook_digest(item).encode())
+            except OSError:
+                pass
+        elif stat.S_ISLNK(st.st_mode):
+            digest.update(os.fsencode(os.readlink(item)))
+    return digest.hexdigest()
+
+
+MAX_DIGESTED_BYTES = 64 * 1024**2
+"""Files larger than this count by their size only in a submission's digest."""
 
 
 _PLAIN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._@-]{0,99}")
@@ -230,25 +273,31 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
         if stat.S_ISLNK(mode):
             if notebook or child.is_dir():
                 stem = child.stem if notebook else child.name
-                entries.append(Entry(stem, None, problem=f"{child.name} is a symbolic link: the grader does not follow links"))
+                entries.append(Entry(stem, None, problem=f"{child.name} is a symbolic link: the grader does not follow links",
+                                     handed_in=child))
         elif notebook and not stat.S_ISDIR(mode):
             if stat.S_ISREG(mode):
                 entries.append(Entry(child.stem, child))
             else:
-                entries.append(Entry(child.stem, None, problem=f"{child.name} is not a regular file: it was not read"))
+                entries.append(Entry(child.stem, None, problem=f"{child.name} is not a regular file: it was not read",
+                                     handed_in=child))
         elif stat.S_ISDIR(mode):
             inner = child / assignment
             if os.path.islink(inner):
                 entries.append(Entry(child.name, None, problem=f"{child.name}/{assignment} is a symbolic link: "
-                                                               "the grader does not follow links"))
+                                                               "the grader does not follow links", handed_in=inner))
                 continue
             if nbgrader and not inner.is_dir():
                 entries.append(Entry(child.name, None, missing=True))
                 continue
-            notebooks, skipped = notebooks_in(inner if inner.is_dir() else child)
+            where = inner if inner.is_dir() else child
+            notebooks, skipped = notebooks_in(where)
             entry = choose_notebook(child.name, notebooks, assignment, expected, skipped)
             problem = _other_assignments_only(notebooks, assignment)
-            entries.append(Entry(child.name, None, note=entry.note, problem=problem) if problem else entry)
+            entry = Entry(child.name, None, note=entry.note, problem=problem) if problem else entry
+            if entry.notebook is None:
+                entry.handed_in = where
+            entries.append(entry)
     # Names are made unique over every student folder, handed in or not, so they never shift when one hands in.
     for entry, name in zip(entries, unique_safe_names([e.name for e in entries])):
         entry.name = name
@@ -329,21 +378,28 @@ def _digest(path: Path | None) -> str:
 
 
 def _handed_in_anew(out_dir: Path, entries: list[Entry]) -> list[Entry]:
-    """The entries whose recorded result graded another notebook than the one there now (a student who handed in
-    again after the batch ran): their results are archived in ``_previous/`` and they are graded again, each with
-    a note saying so. Results older than the recorded digest are taken as they are."""
+    """The entries whose recorded result graded another notebook than the one there now, or found nothing to grade
+    where the submission now holds something else (a student who handed in again after the batch ran): their
+    results are archived in ``_previous/`` and they are graded again, each with a note saying so. Graded results
+    older than the recorded digest are taken as they are."""
     changed = []
     for e in entries:
-        old = _load(out_dir, e.name) if e.notebook is not None else None
-        if old is not None and old.status != GRADER_ERROR and old.notebook_sha256 \
-                and old.notebook_sha256 != _digest(e.notebook):
-            changed.append((e, old))
+        old = _load(out_dir, e.name)
+        if old is None or old.status == GRADER_ERROR:
+            continue
+        if old.notebook_sha256:
+            if old.notebook_sha256 != e.digest():
+                changed.append((e, old))
+        elif old.status == UNGRADABLE and (e.notebook is not None or (e.problem or None) != old.error):
+            changed.append((e, old))  # recorded before such results had a digest: it holds something else now
     if not changed:
         return []
     kept = archive_results(out_dir, [e.name for e, _ in changed], [GRADEBOOK_NAME])
     for e, old in changed:
         score = f"{old.score:g}/{old.max_score:g}" if old.has_score else old.status
-        note = (f"graded again: this notebook is not the one graded before (that grading, {score}, is kept in "
+        what = "this notebook is not the one" if e.notebook is not None and old.notebook_sha256[:7] != "folder:" \
+            else "the submission does not hold what it held when it was"
+        note = (f"graded again: {what} graded before (that grading, {score}, is kept in "
                 f"{kept.relative_to(out_dir).as_posix()}/)")
         e.note = f"{note}; {e.note}" if e.note else note
         (out_dir / e.name / RESULT_NAME).unlink(missing_ok=True)
@@ -404,7 +460,9 @@ def _prepare(batch: Batch, write: Writer | None) -> tuple[list[Entry], list[Entr
     todo = [e for e in entries if e.notebook is not None and not _done(out_dir, e.name)]
     for e in entries:
         if e.notebook is None and not _done(out_dir, e.name):
-            _finish(_unscored(assignment, e, e.problem, UNGRADABLE), out_dir / e.name, write)
+            result = _unscored(assignment, e, e.problem, UNGRADABLE)
+            result.notebook_sha256 = e.digest()
+            _finish(result, out_dir / e.name, write)
     return entries, todo
 
 

@@ -259,3 +259,43 @@ def test_a_notebook_handed_in_again_is_graded_again_and_an_older_suites_results_
     third = batch()
     assert "handed in again" not in third.stdout and len(list((out / "_previous").iterdir())) == 1
     assert "1 result(s) were graded by an earlier version of hw0_setup's suite" in third.stderr and "bob" in third.stderr
+
+
+def test_a_submission_with_nothing_to_grade_is_graded_once_it_holds_a_notebook(open_tmp):
+    """Dave handed in another assignment's notebook and Nina a .py file: both ungradable. Once each hands in this
+    assignment's notebook, the next run grades them (before, their results had no digest and were kept for good,
+    still naming the removed file); a run after that grades nothing again. A result recorded before such results
+    had a digest is graded again too when the submission now holds a notebook."""
+    import json
+
+    folder = open_tmp / "class"  # a folder per student (not nbgrader's layout, whose folders are named by assignment)
+    for student in ("dave", "nina", "olga"):
+        (folder / student).mkdir(parents=True)
+    shutil.copy(REPO / "autograder/samples/hw1_imitation/complete.ipynb", folder / "dave" / "hw1_imitation.ipynb")
+    (folder / "nina" / "hw0_setup.py").write_text("print('my answers')\n")
+    (folder / "olga" / "notes.txt").write_text("forgot the notebook\n")
+    out = open_tmp / "out"
+
+    def batch() -> subprocess.CompletedProcess:
+        done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(folder), "--out", str(out),
+                               "--jobs", "1"], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done
+
+    def rows() -> dict[str, dict]:
+        return {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
+
+    batch()
+    assert {n: r["status"] for n, r in rows().items()} == {"dave": "ungradable", "nina": "ungradable", "olga": "ungradable"}
+    olga = json.loads((out / "olga" / "result.json").read_text())
+    olga["notebook_sha256"] = ""  # as recorded before ungradable results had a digest
+    (out / "olga" / "result.json").write_text(json.dumps(olga))
+    (folder / "dave" / "hw1_imitation.ipynb").unlink()
+    for student in ("dave", "nina", "olga"):
+        shutil.copy(SAMPLES / "complete.ipynb", folder / student / "hw0_setup.ipynb")
+    again = batch()
+    assert "3 submission(s) were handed in again" in again.stdout, again.stdout
+    assert {n: (r["status"], r["score"]) for n, r in rows().items()} == \
+        {"dave": ("graded", "8"), "nina": ("graded", "8"), "olga": ("graded", "8")}
+    assert "hw1_imitation" not in rows()["dave"]["reason"]
+    assert "handed in again" not in batch().stdout, "nothing changed since: nothing graded again"
