@@ -25,7 +25,9 @@ automatic one, plus extra credit). The late rule is the course's nbgrader late-s
 date, or their extension from ``extensions.csv``, recorded in the gradebook first) and recorded as
 nbgrader's ``late_submission_penalty``, so each total equals what ``nbgrader export`` writes as
 ``score`` (0 where nothing was submitted). A written answer not yet graded counts 0 until it is, and
-the command says how many there are. A student whose submission the grader failed on (so it was
+the command says how many there are; a score given by hand to a cell whose text changed since (the
+notebook handed in again, marked by ``nbgrader-sync``) counts until a person grades it again, and the
+command names it. A student whose submission the grader failed on (so it was
 never recorded) gets an empty cell, never a 0, and the command names them.
 """
 from __future__ import annotations
@@ -72,6 +74,8 @@ class FinalGrade:
     not_recorded: str = ""
     """Why the latest grading of this submission is not in the gradebook (the grader failed), if so."""
     lms_user_id: str = ""
+    reread: list[str] = field(default_factory=list)
+    """Cells graded by hand whose text changed since (marked by ``nbgrader-sync``): the earlier score counts."""
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -127,12 +131,16 @@ def final_grades(gb, plugin=None, not_recorded: dict[str, dict[str, str]] | None
                 waiting=sum(g.cell_type != "code" and g.manual_score is None and g.auto_score is None for g in grades),
                 deadline=_utc(submission.duedate), extended=submission.extension is not None, not_recorded=why,
                 lms_user_id=student.lms_user_id or "")
+            grade.reread = sorted(g.name for g in grades if g.manual_score is not None and g.needs_manual_grade)
             _lateness(grade, submission, plugin)
             if why:
                 grade.notes.append(f"the latest grading failed ({plain(why)[:200]}): the grade shown is the one "
                                    "recorded before; grade it again, then sync")
             if grade.waiting:
                 grade.notes.append(f"{grade.waiting} written answer(s) not graded yet, counted 0")
+            if grade.reread:
+                grade.notes.append(f"handed in again since {', '.join(grade.reread)} was graded by hand: the earlier "
+                                   "score counts until it is graded again")
             out.append(grade)
     gb.db.commit()
     return out
@@ -280,6 +288,11 @@ def export(out: Path, course_root: Path | None = None, long: bool = False, fmt: 
     with open_gradebook(coursedir) as gb:
         problems = late.apply_extensions(gb, late.read_extensions(extensions or root / late.EXTENSIONS_NAME))
         grades = final_grades(gb, plugin, read_not_recorded(root))
+    reread = [f"{g.assignment} {plain(g.student_id)}: {', '.join(g.reread)}" for g in grades if g.reread]
+    if reread:
+        problems.append(f"{len(reread)} submission(s) have a score given by hand to a cell whose text changed since "
+                        f"(handed in again): {'; '.join(reread[:20])}; the earlier score counts until a person grades "
+                        "it again in formgrader (it is listed there as needing a grade)")
     people = read_roster(roster or root / ROSTER_NAME)
     columns = read_lms_columns(lms_columns)
     if fmt == "canvas":

@@ -22,7 +22,10 @@ nbgrader-sync ID FOLDER --results DIR``) writes, through ``nbgrader.api.Gradeboo
 Running it again updates the same rows (nbgrader's ``update_or_create_*`` and ``find_*``), never
 adds a second submission, and never writes ``manual_score``, ``extra_credit`` or
 ``manual_comment``: what a person gave in formgrader stays as it was, and a grade a person set
-keeps ``needs_manual_grade`` as formgrader left it. A grader error (no score) changes nothing
+keeps ``needs_manual_grade`` as formgrader left it, but for one case: when the text of a cell a person
+graded changed since (the notebook placed for formgrader before differs from the one placed now: the
+student handed in again), its grade is marked as needing a grade again, and the sync names the student
+and the cell (:attr:`SyncReport.reread`) on every run until a person grades it. A grader error (no score) changes nothing
 of its submission in the gradebook: its student is listed (created if new, with no submission) and
 the course's ``.nbgrader/autograder_not_recorded.json`` names it until a later sync records it, so
 ``export`` leaves that grade empty and says why instead of showing a 0.
@@ -87,6 +90,9 @@ class SyncReport:
     """Scores and comments given by a person, left as they were."""
     waiting: int = 0
     """Written answers that wait for a person's grade."""
+    reread: list[tuple[str, str]] = field(default_factory=list)
+    """``(student, cell)`` for each score a person gave whose cell's text changed since (a notebook handed in
+    again): marked as needing a grade again (nbgrader's ``needs_manual_grade``) until a person grades it."""
     unusable_ids: list[tuple[str, str, str]] = field(default_factory=list)
     """``(student id, id recorded instead, why)`` for each student id that cannot be a gradebook id as it is."""
 
@@ -99,9 +105,16 @@ class SyncReport:
 
     def warnings(self) -> list[str]:
         """What the instructor must act on, one line each (the command prints them on stderr)."""
-        return [f"warning: student id {ascii(raw)} {why}, so it was recorded as {ascii(used)}, which matches no "
-                f"roster entry: rename the student's folder (or their id in the roster), then sync again"
-                for raw, used, why in self.unusable_ids]
+        out = [f"warning: student id {ascii(raw)} {why}, so it was recorded as {ascii(used)}, which matches no "
+               f"roster entry: rename the student's folder (or their id in the roster), then sync again"
+               for raw, used, why in self.unusable_ids]
+        if self.reread:
+            named = ", ".join(f"{plain(s)}: {plain(c)}" for s, c in self.reread[:30])
+            more = f" and {len(self.reread) - 30} more" if len(self.reread) > 30 else ""
+            out.append(f"warning: {len(self.reread)} score(s) given by hand are of a cell whose text changed since "
+                       f"(the notebook was handed in again): {named}{more}. They are marked as needing a grade "
+                       "again in formgrader, and export counts the earlier score until a person grades them.")
+        return out
 
 
 # ------------------------------------------------------------------ the nbgrader course
@@ -519,10 +532,37 @@ def _rows(gb, assignment: str, student: str, timestamp: str | None):
     return by_name_grade, by_name_comment
 
 
+def graded_cell_texts(notebook: nbformat.NotebookNode) -> dict[str, str]:
+    """Per graded cell (its nbgrader ``grade_id``) of a notebook placed for formgrader, the text shown there."""
+    out = {}
+    for cell in notebook.cells:
+        meta = cell.get("metadata", {}).get("nbgrader")
+        if isinstance(meta, dict) and meta.get("grade_id"):
+            out[meta["grade_id"]] = cell.get("source", "").strip()
+    return out
+
+
+def changed_cells(place: Path, notebook: nbformat.NotebookNode) -> set[str]:
+    """The graded cells whose text differs between the notebook placed at ``place`` before (what a person saw in
+    formgrader) and ``notebook`` (about to replace it); none when nothing was placed before."""
+    try:
+        before = graded_cell_texts(nbformat.read(str(place), as_version=4))
+    except (OSError, ValueError, KeyError):
+        return set()
+    after = graded_cell_texts(notebook)
+    return {gid for gid in set(before) | set(after) if before.get(gid) != after.get(gid)}
+
+
 def record_submission(gb, assignment: str, student: str, result: GradeResult, stubs: dict[str, float],
-                      states: dict[str, str], timestamp: str | None, report: SyncReport) -> None:
-    """One student's submission: automatic scores and comments in, a person's scores and comments untouched."""
+                      states: dict[str, str], timestamp: str | None, report: SyncReport,
+                      changed: set[str] = frozenset()) -> None:
+    """One student's submission: automatic scores and comments in, a person's scores and comments untouched, but
+    a score a person gave to a cell in ``changed`` (its text differs from what they graded) marked as needing a
+    grade again (nbgrader's ``needs_manual_grade``, which formgrader clears when a person saves a score)."""
     grades, comments = _rows(gb, assignment, student, timestamp)
+    for name in sorted(changed):
+        if name in grades and grades[name].manual_score is not None:
+            grades[name].needs_manual_grade = True
     scores = {s.name: s.score for s in result.stubs} if result.status == GRADED else {}
     for name in stubs:
         grade, comment = grades[name], comments[name]
@@ -538,6 +578,8 @@ def record_submission(gb, assignment: str, student: str, result: GradeResult, st
         grade.auto_score = 0.0 if unanswered else None
         grade.needs_manual_grade = not unanswered
         report.waiting += not unanswered
+    report.reread += [(student, name) for name, g in grades.items() if g.manual_score is not None
+                      and g.needs_manual_grade]
     report.kept += sum(g.manual_score is not None or g.extra_credit is not None for g in grades.values())
     report.kept += sum(c.manual_comment is not None for c in comments.values())
     gb.db.commit()
@@ -599,11 +641,13 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
             submitters, timestamp = people[name]
             for person in submitters:
                 keep_names(gb, person)
-                record_submission(gb, assignment, person.student_id, result, stubs, states, timestamp, report)
+                place = Path(coursedir.format_path(coursedir.autograded_directory, person.student_id,
+                                                   assignment)) / f"{assignment}.ipynb"
+                changed = changed_cells(place, notebook) if notebook is not None else set()
+                record_submission(gb, assignment, person.student_id, result, stubs, states, timestamp, report,
+                                  changed)
                 report.recorded.append((name, person.student_id))
                 if notebook is not None:
-                    place = Path(coursedir.format_path(coursedir.autograded_directory, person.student_id,
-                                                       assignment)) / f"{assignment}.ipynb"
                     atomic_write(place, nbformat.writes(notebook))
                     report.placed.append(place)
             students[name] = [p.student_id for p in submitters]

@@ -15,7 +15,7 @@ import nbformat
 from autograder.core.batch import safe_name
 from autograder.outputs import export, feedback, gradebook
 from autograder.outputs.files import write_outputs
-from test_term import POINTS, empty_gradebook, graded, grades_of, give, new_course, submission  # noqa: F401
+from test_term import POINTS, empty_gradebook, graded, grades_of, give, new_course, submission, term  # noqa: F401
 
 
 # ------------------------------------------------------------------ T2: a student id that is not a plain name
@@ -60,3 +60,32 @@ def test_a_student_id_that_cannot_be_a_gradebook_id_is_named_in_a_warning(fixtur
     report = gradebook.sync("fx", folder, out, new_course)
     assert [s for _, s in report.recorded] == [safe_name(raw)]
     assert len(report.warnings()) == 1 and "'eve\\tx'" in report.warnings()[0] and safe_name(raw) in report.warnings()[0]
+
+
+# ------------------------------------------------------------------ T3: a hand grade of an answer handed in again
+
+def test_a_hand_grade_of_an_answer_that_changed_is_marked_for_grading_again_and_named(term, tmp_path):
+    folder, out, root = term
+    gradebook.sync("fx", folder, out, root)
+    give(root, "bob", "q_why", 1.5, "Half of it.")
+    give(root, "alice", "q_why", 2.0)
+    give(root, "bob", "Counter", 1.0)  # a stub score changed by hand; bob's code does not change below
+    submission(folder / "bob.ipynb", None)  # bob hands in again without his answer
+    nb = nbformat.read(str(folder / "alice.ipynb"), as_version=4)  # alice again: other code, the same answer
+    nb.cells.append(nbformat.v4.new_code_cell("x = 1"))
+    nbformat.write(nb, str(folder / "alice.ipynb"))
+
+    report = gradebook.sync("fx", folder, out, root)
+    assert grades_of(root, "bob")["q_why"] == (None, 1.5, True), "back in formgrader's needs-grading list"
+    assert grades_of(root, "bob")["Counter"] == (0, 1.0, False), "its cell did not change"
+    assert grades_of(root, "alice")["q_why"] == (None, 2.0, False), "her answer did not change"
+    assert report.reread == [("bob", "q_why")]
+    assert any("bob" in w and "q_why" in w for w in report.warnings())
+    again = gradebook.sync("fx", folder, out, root)  # not graded again yet: still said, not lost
+    assert again.reread == [("bob", "q_why")] and grades_of(root, "bob")["q_why"] == (None, 1.5, True)
+
+    done = export.export(tmp_path / "grades.csv", root)
+    bob = next(g for g in done.grades if g.student_id == "bob")
+    assert "q_why" in bob.note and any("bob" in p and "q_why" in p for p in done.problems)
+    give(root, "bob", "q_why", 0.0)  # a person graded it again (formgrader clears the flag)
+    assert gradebook.sync("fx", folder, out, root).reread == []
