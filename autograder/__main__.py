@@ -104,8 +104,8 @@ def _listed(names: list[str], shown: int = 20) -> str:
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
-    from autograder.core.batch import (Shard, assignment_folder, assignments_in, handed_in_anew, missing_submissions,
-                                       stray_files)
+    from autograder.core.batch import (SEVERAL_NOTEBOOKS, Shard, assignment_folder, assignments_in, handed_in_anew,
+                                       missing_submissions, stray_files)
     from autograder.core import course
     from autograder.core.results import GRADED, GRADER_ERROR, UNGRADABLE
     from autograder.outputs.files import grade_folder
@@ -157,6 +157,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
                   f"mixes two suites: python -m autograder regrade {assignment} {shlex.quote(str(args.folder))} --out "
                   f"{shlex.quote(str(out))} grades them "
                   f"all with this one, keeping the earlier results: {_listed(older)}", file=sys.stderr)
+        unreadable = [r.submission for r in results if r.status == UNGRADABLE]
+        if unreadable:
+            print(f"{len(unreadable)} submission(s) could not be graded (0 in the gradebook, whose reason column says "
+                  f"why): {_listed(unreadable)}")
+        several_notebooks = [r.submission for r in results if any(n.startswith(SEVERAL_NOTEBOOKS) for n in r.notes)]
+        if several_notebooks:
+            print(f"{len(several_notebooks)} submission(s) held several notebooks, and the one with the most stubs "
+                  f"done was graded (each one's feedback names it): {_listed(several_notebooks)}")
         wrong = [r.submission for r in results if r.wrong_notebook]
         if wrong:
             print(f"{len(wrong)} submission(s) define none of {assignment}'s stubs (graded 0; another assignment's "

@@ -151,6 +151,10 @@ def notebooks_in(folder: Path) -> tuple[list[Path], list[str]]:
     return walk_notebooks(folder)
 
 
+SEVERAL_NOTEBOOKS = "several notebooks were submitted"
+"""How the note of a submission with several notebooks starts (the batch's summary names those submissions)."""
+
+
 def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected: list[str],
                     skipped: list[str] = ()) -> Entry:
     """The notebook to grade among a submission's ``notebooks``; ``skipped`` are the files left out (links)."""
@@ -161,21 +165,20 @@ def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected:
                      + (f" ({skipped_note})" if skipped_note else ""))
     if len(notebooks) == 1:
         return Entry(name, notebooks[0], note=skipped_note)
-    named = [p for p in notebooks if p.stem == assignment]
-    if len(named) == 1:
-        chosen = named[0]
-    else:  # the notebook with the most stubs done (found and no longer raising NotImplementedError)
-        def progress(path: Path) -> tuple[int, int, float]:
-            try:
-                found = find_stubs(read_code_cells(path)[0], expected)[0]
-            except (NotebookError, GraderError):
-                return (-1, -1, 0.0)
-            done = sum("raise NotImplementedError" not in m.source for m in found.values())
-            return (done, len(found), os.lstat(path).st_mtime)
-        chosen = max(notebooks, key=progress)
+    def progress(path: Path) -> tuple[int, int, bool, float]:
+        """Stubs done (found and no longer raising NotImplementedError), stubs found, named after the assignment,
+        modified last: students who work in a copy (``hw0_setup-Copy1.ipynb``) hand in the released file too."""
+        try:
+            found = find_stubs(read_code_cells(path)[0], expected)[0]
+        except (NotebookError, GraderError):
+            return (-1, -1, path.stem == assignment, 0.0)
+        done = sum("raise NotImplementedError" not in m.source for m in found.values())
+        return (done, len(found), path.stem == assignment, os.lstat(path).st_mtime)
+
+    chosen = max(notebooks, key=progress)
     others = [p.name for p in notebooks if p != chosen]
     listed = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
-    note = f"several notebooks were submitted; graded {chosen.name} (not {listed})"
+    note = f"{SEVERAL_NOTEBOOKS}; graded {chosen.name}, the one with the most stubs done (not {listed})"
     return Entry(name, chosen, note=note + (f"; {skipped_note}" if skipped_note else ""))
 
 

@@ -44,6 +44,25 @@ def test_layouts_are_recognised(tmp_path):
     assert entries["submission_102"].notebook is None and "no notebook" in entries["submission_102"].problem
 
 
+def test_a_student_who_worked_in_a_copy_is_graded_from_the_copy(tmp_path):
+    """Erin handed in the released hw0_setup.ipynb untouched and her work in hw0_setup-Copy1.ipynb: the copy, with
+    more stubs done, is graded (before, the file named after the assignment always won: 0 points, said only in
+    her feedback). Where both have as many stubs done, the one named after the assignment is graded."""
+    erin = tmp_path / "class" / "erin"
+    erin.mkdir(parents=True)
+    shutil.copy(SAMPLES / "untouched.ipynb", erin / "hw0_setup.ipynb")
+    shutil.copy(SAMPLES / "complete.ipynb", erin / "hw0_setup-Copy1.ipynb")
+    finn = tmp_path / "class" / "finn"
+    finn.mkdir()
+    shutil.copy(SAMPLES / "complete.ipynb", finn / "hw0_setup.ipynb")
+    shutil.copy(SAMPLES / "complete.ipynb", finn / "hw0_setup-Copy1.ipynb")
+    os.utime(finn / "hw0_setup.ipynb", (0, 0))  # older: the name decides a tie before the time does
+    entries = {e.name: e for e in discover(tmp_path / "class", "hw0_setup", EXPECTED)}
+    assert entries["erin"].notebook.name == "hw0_setup-Copy1.ipynb"
+    assert "the one with the most stubs done (not hw0_setup.ipynb)" in entries["erin"].note
+    assert entries["finn"].notebook.name == "hw0_setup.ipynb"
+
+
 def test_killed_batch_resumes_and_grades_each_submission_once(open_tmp):
     folder, out = open_tmp / "in", open_tmp / "out"
     folder.mkdir()
@@ -285,7 +304,8 @@ def test_a_submission_with_nothing_to_grade_is_graded_once_it_holds_a_notebook(o
     def rows() -> dict[str, dict]:
         return {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
 
-    batch()
+    first = batch()
+    assert "3 submission(s) could not be graded" in first.stdout and "dave, nina, olga" in first.stdout, first.stdout
     assert {n: r["status"] for n, r in rows().items()} == {"dave": "ungradable", "nina": "ungradable", "olga": "ungradable"}
     olga = json.loads((out / "olga" / "result.json").read_text())
     olga["notebook_sha256"] = ""  # as recorded before ungradable results had a digest
