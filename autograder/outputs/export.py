@@ -5,7 +5,8 @@
 - ``plain`` (the default): one row per student and, per assignment, ``<id>`` (the total, after any
   late penalty), ``<id> automatic`` (the stubs' scores: the hidden tests', or a person's where one
   changed it in formgrader), ``<id> written`` (the hand-graded answers), ``<id> late`` (``yes``/``no``
-  when the gradebook knows both the deadline and the submission time, empty otherwise),
+  when the gradebook knows both the deadline and the submission time, empty otherwise; a submission
+  with a deadline but no time is named in a warning and its note),
   ``<id> penalty`` (the points the late rule took) and ``<id> note`` (what was applied, in words:
   an extension, how late, the penalty, a grade not recorded because the grader failed), then the
   course total. ``--long`` writes one row per student and assignment instead.
@@ -74,6 +75,8 @@ class FinalGrade:
     not_recorded: str = ""
     """Why the latest grading of this submission is not in the gradebook (the grader failed), if so."""
     lms_user_id: str = ""
+    time_unknown: bool = False
+    """A deadline is set but the submission's time is not known, so lateness could not be checked."""
     reread: list[str] = field(default_factory=list)
     """Cells graded by hand whose text changed since (marked by ``nbgrader-sync``): the earlier score counts."""
     notes: list[str] = field(default_factory=list)
@@ -151,6 +154,10 @@ def _lateness(grade: FinalGrade, submission, plugin) -> None:
     gradebook as nbgrader's own penalty, on its notebook), and a note saying so."""
     if grade.extended:
         grade.notes.append(f"extension to {grade.deadline}")
+    if submission.duedate is not None and submission.timestamp is None:
+        grade.time_unknown = True
+        grade.notes.append("submission time unknown (no timestamp.txt or :created_at:): lateness not checked, "
+                           "no late penalty applied")
     if submission.timestamp is None or submission.duedate is None:
         return
     grade.seconds_late = submission.total_seconds_late
@@ -288,6 +295,12 @@ def export(out: Path, course_root: Path | None = None, long: bool = False, fmt: 
     with open_gradebook(coursedir) as gb:
         problems = late.apply_extensions(gb, late.read_extensions(extensions or root / late.EXTENSIONS_NAME))
         grades = final_grades(gb, plugin, read_not_recorded(root))
+    unknown = [f"{g.assignment} {plain(g.student_id)}" for g in grades if g.time_unknown]
+    if unknown:
+        problems.append(f"{len(unknown)} submission(s) have a deadline but no submission time (no timestamp.txt, no "
+                        f":created_at:), so they were not checked for lateness and no late penalty ("
+                        f"{late.describe(plugin)}) was applied: {', '.join(unknown[:30])}"
+                        + (f" and {len(unknown) - 30} more" if len(unknown) > 30 else ""))
     reread = [f"{g.assignment} {plain(g.student_id)}: {', '.join(g.reread)}" for g in grades if g.reread]
     if reread:
         problems.append(f"{len(reread)} submission(s) have a score given by hand to a cell whose text changed since "

@@ -89,3 +89,25 @@ def test_a_hand_grade_of_an_answer_that_changed_is_marked_for_grading_again_and_
     assert "q_why" in bob.note and any("bob" in p and "q_why" in p for p in done.problems)
     give(root, "bob", "q_why", 0.0)  # a person graded it again (formgrader clears the flag)
     assert gradebook.sync("fx", folder, out, root).reread == []
+
+
+# ------------------------------------------------------------------ T11: no submission time, a due date and a rule
+
+def test_export_names_the_submissions_whose_time_is_unknown_when_there_is_a_deadline(term, tmp_path):
+    folder, out, root = term
+    with (root / "nbgrader_config.py").open("a") as f:
+        f.write("\nc.LatePenalty.percent = 10.0\n")
+    gradebook.sync("fx", folder, out, root)  # flat notebooks: no timestamp.txt, no time
+    plain_before = export.export(tmp_path / "before.csv", root)
+    assert not any("time" in p for p in plain_before.problems), "no due date: nothing to say"
+    with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
+        gb.update_or_create_assignment("fx", duedate="2026-03-01 12:00:00 UTC")
+        for student in ("alice", "bob"):
+            gb.update_or_create_submission("fx", student, timestamp="2026-03-02 13:00:00 UTC")
+    done = export.export(tmp_path / "grades.csv", root)
+    unknown = [p for p in done.problems if "submission time" in p]
+    assert len(unknown) == 1 and "fx carol" in unknown[0] and "alice" not in unknown[0]
+    carol = next(g for g in done.grades if g.student_id == "carol")
+    assert carol.late == "" and carol.penalty == 0 and "submission time unknown" in carol.note
+    alice = next(g for g in done.grades if g.student_id == "alice")
+    assert alice.late == "yes" and alice.penalty > 0 and "unknown" not in alice.note
