@@ -22,7 +22,8 @@ When the batch was recorded in the course's nbgrader gradebook (``nbgrader-sync`
 given (``--course``, default this repository), each written answer is an item too, with the score a
 person gave in formgrader: the totals are then the automatic score plus the written one, an answer
 not graded yet counts 0 in the totals and is left out of its own item's figures (the report says
-how many wait).
+how many wait). A stub score a person changed in formgrader counts in the totals too, as in
+``export`` (the report names them); the stub and test items stay the hidden tests' scores.
 
 Grader errors are counted and named in the report's first paragraph. Names in the similarity part
 (its tables, pages and ``similarity.csv``) are pseudonyms by default, as formgrader's grading pages
@@ -111,6 +112,9 @@ class ClassTable:
     """(N, written) scores a person gave; NaN where not graded yet."""
     written_max: np.ndarray = field(default_factory=lambda: np.zeros(0))
     written_answered: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    hand_stubs: dict[str, dict[str, tuple[float | None, float]]] = field(default_factory=dict)
+    """Stub scores a person changed in formgrader, per submission: in the totals (as in ``export``), not in the
+    stub and test items (those are the hidden tests')."""
 
 
 def _attempted(stub_tests: list) -> bool:
@@ -123,9 +127,13 @@ WrittenGrades = dict[str, dict[str, tuple[float | None, bool]]]
 
 
 def class_table(results: dict[str, GradeResult], written: WrittenGrades | None = None,
-                written_max: dict[str, float] | None = None) -> ClassTable:
+                written_max: dict[str, float] | None = None,
+                hand_stubs: dict[str, dict[str, tuple[float | None, float]]] | None = None) -> ClassTable:
     """Arrange the results of a batch folder by submission and item (a missing stub or test scores 0); with
-    ``written`` (from the gradebook), the written answers as items too and in the totals."""
+    ``written`` (from the gradebook), the written answers as items too and in the totals; with ``hand_stubs``,
+    the stub scores a person changed in formgrader in the totals (the gradebook's and ``export``'s)."""
+    from autograder.outputs.gradebook import hand_stub_delta
+
     scored = {n: r for n, r in sorted(results.items()) if r.has_score}
     stubs = list(dict.fromkeys(s.name for r in scored.values() for s in r.stubs))
     tests = list(dict.fromkeys((t.stub, t.name) for r in scored.values() for s in r.stubs for t in s.tests))
@@ -155,13 +163,17 @@ def class_table(results: dict[str, GradeResult], written: WrittenGrades | None =
             score, was_answered = written.get(name, {}).get(gid, (0.0, False))
             given[i, j] = np.nan if score is None else score
             answered[i, j] = was_answered
-    totals = np.array([r.score for r in scored.values()]) + np.nan_to_num(given).sum(axis=1)
+    hand_stubs = {name: h for name, h in (hand_stubs or {}).items() if name in scored and h}
+    by_hand = np.array([hand_stub_delta({s.name: s.score for s in r.stubs}, hand_stubs.get(name, {}))
+                        for name, r in scored.items()]) if n else np.zeros(0)
+    totals = np.array([r.score for r in scored.values()]) + np.nan_to_num(given).sum(axis=1) + by_hand
     maxima = np.array([written_max[g] for g in answers])
     return ClassTable(list(scored), totals, float(stub_max.sum() + maxima.sum()), stubs,
                       stub_scores, stub_max, tests, test_scores, test_max_arr, attempted,
                       Counter(r.status for r in results.values()),
                       {v for r in scored.values() if (v := getattr(r, "suite_version", ""))},
-                      sorted(n for n, r in results.items() if not r.has_score), answers, given, maxima, answered)
+                      sorted(n for n, r in results.items() if not r.has_score), answers, given, maxima, answered,
+                      hand_stubs)
 
 
 def item_rest_correlation(scores: np.ndarray, totals: np.ndarray, parts: np.ndarray | None = None) -> np.ndarray:
@@ -362,9 +374,11 @@ class ClassReport:
 
 
 def analyse(assignment: str, results: dict[str, GradeResult], written: WrittenGrades | None = None,
-            written_max: dict[str, float] | None = None) -> ClassReport:
-    """Every figure of the report, from a batch folder's results (and the written answers' grades, if given)."""
-    table = class_table(results, written, written_max)
+            written_max: dict[str, float] | None = None,
+            hand_stubs: dict[str, dict[str, tuple[float | None, float]]] | None = None) -> ClassReport:
+    """Every figure of the report, from a batch folder's results (and the written answers' grades and stub scores
+    changed by hand, if given)."""
+    table = class_table(results, written, written_max, hand_stubs)
     stub_items, test_items = items(table)
     top, messages = failures(results)
     stats, edges, counts = distribution(table)
@@ -413,6 +427,10 @@ def _intro(report: ClassReport) -> tuple[str, str]:
         waiting = int(np.isnan(t.written_scores).sum())
         left += (f" Written answers ({', '.join(t.written)}) from the gradebook are items and in the totals"
                  + (f"; {waiting} not graded yet count 0 there and are left out of their item." if waiting else "."))
+    if t.hand_stubs:
+        listed = "; ".join(f"{n}: {', '.join(h)}" for n, h in sorted(t.hand_stubs.items())[:20])
+        left += (f" Stub scores changed by hand in formgrader ({sum(map(len, t.hand_stubs.values()))}: {listed}) "
+                 "count in the totals, as in export; the per-stub and per-test figures are the hidden tests'.")
     if len(t.suite_versions) > 1:
         left += (f" Warning: these results come from {len(t.suite_versions)} versions of the hidden suite (a "
                  "regrade of some submissions after the suite changed): per-test figures mix them; regrade all.")
@@ -604,7 +622,10 @@ def write_class_report(assignment: str, results_dir: Path, out_dir: Path | None 
     results = {n: r for n, r in read_results(results_dir).items() if r.assignment == assignment}
     if not results:
         raise SystemExit(f"no results of {assignment} in {results_dir} (run `python -m autograder batch` first)")
-    report = analyse(assignment, results, *written_from_gradebook(assignment, results_dir, course_root))
+    from autograder.outputs.gradebook import hand_stub_scores
+
+    report = analyse(assignment, results, *written_from_gradebook(assignment, results_dir, course_root),
+                     hand_stubs=hand_stub_scores(assignment, results_dir, course_root))
     if submissions is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
         rename = None

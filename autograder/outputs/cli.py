@@ -107,7 +107,7 @@ def _cmd_regrade(args: argparse.Namespace) -> int:
 
     require_one_checkout()
     done = regrade(args.assignment, args.folder, args.out, args.only or None, jobs=args.jobs, course_root=args.course)
-    print("\n".join(change_lines(done.changes, done.written)))
+    print("\n".join(change_lines(done.changes, done.written, done.hand_stubs)))
     print(f"earlier results: {done.archive}" + ("; gradebook updated (hand-given scores and comments kept)"
                                                 if done.synced else "; not recorded in a gradebook yet"))
     if done.grader_errors:

@@ -655,3 +655,38 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
     atomic_write(results_dir / STUDENTS_NAME, json.dumps({**read_students(results_dir), **students}, indent=1,
                                                          sort_keys=True))
     return report
+
+
+# ------------------------------------------------------------------ stub scores a person changed
+
+HandStubs = dict[str, tuple[float | None, float]]
+"""Per stub a person changed in formgrader: ``(manual_score or None, extra_credit or 0)``."""
+
+
+def hand_stub_scores(assignment: str, results_dir: Path, course_root: Path | None = None) -> dict[str, HandStubs]:
+    """Per synced submission of ``results_dir`` (its first student's grades), the stub scores a person changed
+    in formgrader (a score or extra credit on a stub's cell); empty before any sync. ``export`` counts them."""
+    from nbgrader.api import MissingEntry
+
+    students = read_students(results_dir)
+    if not students:
+        return {}
+    out: dict[str, HandStubs] = {}
+    with open_gradebook(course_directory(course_root)) as gb:
+        for name, ids in students.items():
+            try:
+                submitted = gb.find_submission_notebook(assignment, assignment, ids[0])
+            except (MissingEntry, IndexError):
+                continue
+            changed = {g.name: (g.manual_score, g.extra_credit or 0.0) for g in submitted.grades
+                       if g.cell_type == "code" and (g.manual_score is not None or g.extra_credit)}
+            if changed:
+                out[name] = changed
+    return out
+
+
+def hand_stub_delta(stub_scores: dict[str, float], hand: HandStubs) -> float:
+    """What the stub scores a person changed add to the automatic score ``sum(stub_scores)`` (as the gradebook
+    counts a grade: the person's score where given, else the automatic one, plus extra credit)."""
+    return sum((manual if manual is not None else stub_scores.get(stub, 0.0)) + extra - stub_scores.get(stub, 0.0)
+               for stub, (manual, extra) in hand.items())

@@ -10,7 +10,8 @@ of a batch already graded into ``DIR`` (all of them, or the named few):
 3. when ``DIR`` was recorded in the course's gradebook before, it records it again: the
    automatic scores change, the scores and comments people gave in formgrader stay;
 4. it prints, per submission, the automatic score before and after, the stubs that changed,
-   the hand-given written score (unchanged) and the total before and after.
+   the hand-given written score (unchanged) and the total before and after, which counts a stub
+   score a person changed in formgrader (kept, and named on the line) as ``export`` does.
 
 Before it writes anything it refuses a partial regrade (``--only``) when the suite changed since the
 other submissions were graded (their recorded suite version is not the current one): grading a few
@@ -29,6 +30,7 @@ from pathlib import Path
 from autograder.core import course
 from autograder.core.batch import GRADEBOOK_NAME, discover
 from autograder.outputs.files import grade_folder
+from autograder.outputs.gradebook import HandStubs, hand_stub_delta, hand_stub_scores
 from autograder.outputs.batch_output import read_results, read_students
 from autograder.core.store import RESULT_NAME, archive_results
 from autograder.core.results import GRADED, GRADER_ERROR, GradeResult
@@ -44,6 +46,9 @@ class Change:
     """``(stub, before, after)`` for each stub whose score changed."""
     status: tuple[str, str] | None = None
     """``(before, after)`` when the result's status changed (graded, ungradable, grader_error)."""
+    before_stubs: dict[str, float] = field(default_factory=dict)
+    """Every stub's automatic score before (empty without a score); ``after_stubs`` after."""
+    after_stubs: dict[str, float] = field(default_factory=dict)
 
     @property
     def changed(self) -> bool:
@@ -66,7 +71,7 @@ def compare(before: dict[str, GradeResult], after: dict[str, GradeResult],
                  if old_stubs.get(s) != new_stubs.get(s)]
         statuses = (old.status if old else "none", new.status if new else "none")
         changes.append(Change(name, _score(old), _score(new), stubs,
-                              statuses if statuses[0] != statuses[1] else None))
+                              statuses if statuses[0] != statuses[1] else None, old_stubs, new_stubs))
     return changes
 
 
@@ -74,9 +79,13 @@ def _fmt(value: float | None) -> str:
     return "-" if value is None else f"{round(value, 6):g}"
 
 
-def change_lines(changes: list[Change], written: dict[str, float | None] | None = None) -> list[str]:
+def change_lines(changes: list[Change], written: dict[str, float | None] | None = None,
+                 hand_stubs: dict[str, HandStubs] | None = None) -> list[str]:
     """A table, one line per submission: automatic before → after, the stubs that changed and, when
-    ``written`` (the hand-given written score per submission) is known, it and the totals."""
+    ``written`` (the hand-given written score per submission) is known, it and the totals. The totals count
+    ``hand_stubs`` (stub scores a person changed in formgrader, kept) as the gradebook and ``export`` do, and
+    the line names them."""
+    hand_stubs = hand_stubs or {}
     lines = []
     width = max([len(c.submission) for c in changes] + [10])
     head = f"{'submission':<{width}}  {'automatic':<15}"
@@ -88,13 +97,20 @@ def change_lines(changes: list[Change], written: dict[str, float | None] | None 
         line = f"{c.submission:<{width}}  {auto:<15}"
         if written is not None:
             hand = written.get(c.submission)
+            stubs_by_hand = hand_stubs.get(c.submission, {})
             total = ("-" if hand is None or c.after is None or c.before is None else
-                     f"{_fmt(c.before + hand)} → {_fmt(c.after + hand)}")
+                     f"{_fmt(c.before + hand + hand_stub_delta(c.before_stubs, stubs_by_hand))} → "
+                     f"{_fmt(c.after + hand + hand_stub_delta(c.after_stubs, stubs_by_hand))}")
             line += f"  {_fmt(hand):<23}  {total:<15}"
         what = [f"{s} {_fmt(a)} → {_fmt(b)}" for s, a, b in c.stubs]
         if c.status:
             what.insert(0, f"{c.status[0]} → {c.status[1]}")
-        lines.append((line + "  " + ("; ".join(what) or "nothing")).rstrip())
+        kept = [f"{s} {_fmt(m) if m is not None else 'tests'}" + (f" + {_fmt(x)} extra" if x else "")
+                for s, (m, x) in hand_stubs.get(c.submission, {}).items()] if written is not None else []
+        text = "; ".join(what) or "nothing"
+        if kept:
+            text += f" (stub score changed by hand, kept, in the total: {', '.join(kept)})"
+        lines.append((line + "  " + text).rstrip())
     changed = sum(c.changed for c in changes)
     lines.append(f"{changed} of {len(changes)} submission(s) changed")
     return lines
@@ -132,6 +148,8 @@ class Regrade:
     written: dict[str, float | None] | None
     grader_errors: list[str] = field(default_factory=list)
     """Submissions the grader failed on in this regrade (no score: run it again)."""
+    hand_stubs: dict[str, HandStubs] = field(default_factory=dict)
+    """Stub scores a person changed in formgrader, per submission (kept; in the totals)."""
 
 
 def other_suite_versions(assignment: str, before: dict[str, GradeResult], names: list[str]) -> dict[str, str]:
@@ -171,9 +189,10 @@ def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None
     after = read_results(out_dir)
     changes = compare(before, after, names)
     synced = bool(read_students(out_dir))
-    written = None
+    written, hand_stubs = None, {}
     if synced:
         sync(assignment, folder, out_dir, course_root)
         written = written_scores(assignment, out_dir, course_root)
+        hand_stubs = hand_stub_scores(assignment, out_dir, course_root)
     errors = [n for n in names if n in after and after[n].status == GRADER_ERROR]
-    return Regrade(kept, changes, synced, written, errors)
+    return Regrade(kept, changes, synced, written, errors, hand_stubs)

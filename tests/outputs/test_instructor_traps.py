@@ -111,3 +111,34 @@ def test_export_names_the_submissions_whose_time_is_unknown_when_there_is_a_dead
     assert carol.late == "" and carol.penalty == 0 and "submission time unknown" in carol.note
     alice = next(g for g in done.grades if g.student_id == "alice")
     assert alice.late == "yes" and alice.penalty > 0 and "unknown" not in alice.note
+
+
+# ------------------------------------------------------------------ T4: stub scores changed by hand, in every total
+
+def test_regrade_and_class_report_totals_count_a_stub_score_changed_by_hand_as_export_does(term, tmp_path):
+    from autograder.outputs import regrade
+    from autograder.outputs.batch_output import read_results
+    from autograder.outputs.class_report import write_class_report
+
+    folder, out, root = term
+    gradebook.sync("fx", folder, out, root)
+    give(root, "bob", "Counter", 1.5)  # the tests gave 0 of 2; a person gave 1.5
+    give(root, "bob", "q_why", 1.0)
+    before = read_results(out)
+    write_outputs(graded("bob", {"scaled_sum", "mean_of"}), out / "bob")  # a regrade: mean_of 0 → 1
+    gradebook.sync("fx", folder, out, root)
+    exported = {g.student_id: g.total for g in export.export(tmp_path / "grades.csv", root).grades}
+    assert exported["bob"] == 3 + 1.5 + 1 + 1.0
+
+    done = regrade.Regrade(out, regrade.compare(before, read_results(out)), True,
+                           regrade.written_scores("fx", out, root), [],
+                           gradebook.hand_stub_scores("fx", out, root))
+    lines = regrade.change_lines(done.changes, done.written, done.hand_stubs)
+    bob = next(line for line in lines if line.startswith("bob"))
+    assert "3 → 4" in bob and "5.5 → 6.5" in bob, bob  # before: 3 + 1.5 by hand + 1 written
+    assert "Counter 1.5" in bob, "the line says which stub score a person set"
+
+    report = write_class_report("fx", out, tmp_path / "report", course_root=root)
+    totals = dict(zip(report.table.names, report.table.totals))
+    assert totals == {name: exported[name] for name in totals}, "the report's totals are export's"
+    assert "Counter" in (tmp_path / "report" / "report.md").read_text().split("## Score distribution")[0]
