@@ -120,9 +120,9 @@ def _cmd_regrade(args: argparse.Namespace) -> int:
 
 def _cmd_diff(args: argparse.Namespace) -> int:
     from autograder.outputs.batch_output import read_results
-    from autograder.outputs.regrade import change_lines, compare
+    from autograder.outputs.regrade import diff_lines
 
-    print("\n".join(change_lines(compare(read_results(args.old), read_results(args.new)))))
+    print("\n".join(diff_lines(read_results(args.old), read_results(args.new))))
     return 0
 
 

@@ -20,7 +20,8 @@ suites. It ends with a non-zero status when the grader failed on any submission 
 score; run it again), naming them.
 
 ``python -m autograder results-diff OLD NEW`` prints the same comparison for any two result
-folders (``DIR/_previous/<time>`` and ``DIR``, say).
+folders (``DIR/_previous/<time>`` and ``DIR``, say), over the submissions in both, and says how many
+were in one only (a ``_previous/<time>`` the batch wrote when one student handed in again holds that one).
 """
 from __future__ import annotations
 
@@ -113,6 +114,21 @@ def change_lines(changes: list[Change], written: dict[str, float | None] | None 
         lines.append((line + "  " + text).rstrip())
     changed = sum(c.changed for c in changes)
     lines.append(f"{changed} of {len(changes)} submission(s) changed")
+    return lines
+
+
+def diff_lines(before: dict[str, GradeResult], after: dict[str, GradeResult]) -> list[str]:
+    """``results-diff``: the comparison of the submissions in both sets of results, and how many were in one only
+    (a ``_previous/<time>`` written when one student handed in again holds that student alone)."""
+    both = sorted(set(before) & set(after))
+    lines = change_lines(compare(before, after, both))
+
+    def only(names: set[str]) -> str:
+        listed = ", ".join(sorted(names)[:10]) + (f" and {len(names) - 10} more" if len(names) > 10 else "")
+        return f"{len(names)} only in the {{}} one" + (f" (not compared: {listed})" if names else "")
+
+    lines.append(f"compared the {len(both)} submission(s) in both folders; "
+                 + only(set(after) - set(before)).format("new") + ", " + only(set(before) - set(after)).format("old"))
     return lines
 
 

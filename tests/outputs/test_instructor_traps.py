@@ -142,3 +142,20 @@ def test_regrade_and_class_report_totals_count_a_stub_score_changed_by_hand_as_e
     totals = dict(zip(report.table.names, report.table.totals))
     assert totals == {name: exported[name] for name in totals}, "the report's totals are export's"
     assert "Counter" in (tmp_path / "report" / "report.md").read_text().split("## Score distribution")[0]
+
+
+# ------------------------------------------------------------------ T5: results-diff against a partial snapshot
+
+def test_results_diff_compares_only_the_submissions_in_both_and_says_how_many_were_left_out(term, capsys):
+    from autograder.__main__ import main
+    from autograder.outputs import regrade
+
+    folder, out, root = term
+    snapshot = regrade.archive(out, ["bob"])  # as the batch archives one student who handed in again
+    write_outputs(graded("bob", {"scaled_sum", "mean_of"}), out / "bob")
+    assert main(["results-diff", str(snapshot), str(out)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in printed[1:-2]] == ["bob"], "alice and carol are not in the snapshot"
+    assert printed[-2] == "1 of 1 submission(s) changed"
+    assert printed[-1] == ("compared the 1 submission(s) in both folders; 2 only in the new one (not compared: "
+                           "alice, carol), 0 only in the old one")
