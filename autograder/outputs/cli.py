@@ -110,6 +110,8 @@ def _cmd_regrade(args: argparse.Namespace) -> int:
     print("\n".join(change_lines(done.changes, done.written, done.hand_stubs)))
     print(f"earlier results: {done.archive}" + ("; gradebook updated (hand-given scores and comments kept)"
                                                 if done.synced else "; not recorded in a gradebook yet"))
+    for line in done.sync_warnings:
+        print(line, file=sys.stderr)
     if done.grader_errors:
         print(f"the grader failed on {len(done.grader_errors)} submission(s): "
               f"{', '.join(plain(n) for n in done.grader_errors[:20])}; they have no score (and were not recorded "

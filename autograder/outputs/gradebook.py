@@ -95,6 +95,11 @@ class SyncReport:
     again): marked as needing a grade again (nbgrader's ``needs_manual_grade``) until a person grades it."""
     unusable_ids: list[tuple[str, str, str]] = field(default_factory=list)
     """``(student id, id recorded instead, why)`` for each student id that cannot be a gradebook id as it is."""
+    other_suite: dict[str, str] = field(default_factory=dict)
+    """``{submission: suite version}`` for each recorded result graded by a version of the suite other than the
+    current one (a result that records no version is not counted)."""
+    suite_now: str = ""
+    regrade_command: str = ""
 
     def lines(self, assignment: str, gradebook: str) -> list[str]:
         out = [f"{assignment}: {len(self.recorded)} submission(s) recorded in {gradebook}, "
@@ -108,6 +113,13 @@ class SyncReport:
         out = [f"warning: student id {ascii(raw)} {why}, so it was recorded as {ascii(used)}, which matches no "
                f"roster entry: rename the student's folder (or their id in the roster), then sync again"
                for raw, used, why in self.unusable_ids]
+        if self.other_suite:
+            names = sorted(self.other_suite)
+            listed = ", ".join(plain(n) for n in names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
+            out.append(f"warning: {len(names)} result(s) recorded here were graded by another version of the suite "
+                       f"({', '.join(sorted(set(self.other_suite.values())))}; the current one is {self.suite_now}): "
+                       f"{listed}. Their scores are the old suite's; regrade them all, which records the new ones: "
+                       f"{self.regrade_command}")
         if self.reread:
             named = ", ".join(f"{plain(s)}: {plain(c)}" for s, c in self.reread[:30])
             more = f" and {len(self.reread) - 30} more" if len(self.reread) > 30 else ""
@@ -611,7 +623,8 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
     stubs = stub_points(assignment, list(results.values()))
     written = written_answers(assignment)
     coursedir = course_directory(course_root)
-    report = SyncReport()
+    report = SyncReport(suite_now=course.suite_version(assignment),
+                        regrade_command=f"python -m autograder regrade {assignment} {folder} --out {results_dir}")
     people = _submitters(list(entries.values()), folder, report)
     students: dict[str, list[str]] = {}
     failed: dict[str, str] = {}
@@ -639,6 +652,8 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
                     report.skipped.append((name, f"its notebook cannot be read any more: {plain(str(err))}"))
                     continue
             submitters, timestamp = people[name]
+            if result.suite_version and result.suite_version != report.suite_now:
+                report.other_suite[name] = result.suite_version
             for person in submitters:
                 keep_names(gb, person)
                 place = Path(coursedir.format_path(coursedir.autograded_directory, person.student_id,

@@ -166,6 +166,8 @@ class Regrade:
     """Submissions the grader failed on in this regrade (no score: run it again)."""
     hand_stubs: dict[str, HandStubs] = field(default_factory=dict)
     """Stub scores a person changed in formgrader, per submission (kept; in the totals)."""
+    sync_warnings: list[str] = field(default_factory=list)
+    """What the gradebook sync warned about (hand grades of a changed cell, student ids it could not use)."""
 
 
 def other_suite_versions(assignment: str, before: dict[str, GradeResult], names: list[str]) -> dict[str, str]:
@@ -205,10 +207,10 @@ def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None
     after = read_results(out_dir)
     changes = compare(before, after, names)
     synced = bool(read_students(out_dir))
-    written, hand_stubs = None, {}
+    written, hand_stubs, warned = None, {}, []
     if synced:
-        sync(assignment, folder, out_dir, course_root)
+        warned = sync(assignment, folder, out_dir, course_root).warnings()
         written = written_scores(assignment, out_dir, course_root)
         hand_stubs = hand_stub_scores(assignment, out_dir, course_root)
     errors = [n for n in names if n in after and after[n].status == GRADER_ERROR]
-    return Regrade(kept, changes, synced, written, errors, hand_stubs)
+    return Regrade(kept, changes, synced, written, errors, hand_stubs, warned)

@@ -159,3 +159,23 @@ def test_results_diff_compares_only_the_submissions_in_both_and_says_how_many_we
     assert printed[-2] == "1 of 1 submission(s) changed"
     assert printed[-1] == ("compared the 1 submission(s) in both folders; 2 only in the new one (not compared: "
                            "alice, carol), 0 only in the old one")
+
+
+# ------------------------------------------------------------------ T6: results of an earlier suite, synced
+
+def test_sync_warns_when_results_were_graded_by_a_suite_other_than_the_current_one(term):
+    from autograder.core import course
+
+    folder, out, root = term
+    assert not any("suite" in w for w in gradebook.sync("fx", folder, out, root).warnings())
+    for name in ("alice", "bob"):
+        result = graded(name, {"scaled_sum"})
+        result.suite_version = "0123456789abcdef"
+        write_outputs(result, out / name)
+    current = graded("carol", set())
+    current.suite_version = course.suite_version("fx")
+    write_outputs(current, out / "carol")
+    report = gradebook.sync("fx", folder, out, root)
+    stale = [w for w in report.warnings() if "suite" in w]
+    assert len(stale) == 1 and "2 result(s)" in stale[0] and "0123456789abcdef" in stale[0]
+    assert "alice" in stale[0] and "carol" not in stale[0] and "regrade fx" in stale[0]
