@@ -98,6 +98,9 @@ class SyncReport:
     other_suite: dict[str, str] = field(default_factory=dict)
     """``{submission: suite version}`` for each recorded result graded by a version of the suite other than the
     current one (a result that records no version is not counted)."""
+    earlier_ids: list[tuple[str, str]] = field(default_factory=list)
+    """``(id recorded by an earlier sync, student id now)``: the safe name an earlier version of this sync recorded
+    a student under, still holding a submission (export lists it as a student of its own)."""
     suite_now: str = ""
     regrade_command: str = ""
 
@@ -113,6 +116,9 @@ class SyncReport:
         out = [f"warning: student id {ascii(raw)} {why}, so it was recorded as {ascii(used)}, which matches no "
                f"roster entry: rename the student's folder (or their id in the roster), then sync again"
                for raw, used, why in self.unusable_ids]
+        out += [f"warning: an earlier sync recorded {plain(student)}'s submission under {ascii(old)}, which export "
+                f"lists as a student of its own: remove it (nbgrader db student remove {ascii(old)} --force, from the "
+                f"course root), then sync again" for old, student in self.earlier_ids]
         if self.other_suite:
             names = sorted(self.other_suite)
             listed = ", ".join(plain(n) for n in names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
@@ -628,6 +634,8 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
     people = _submitters(list(entries.values()), folder, report)
     students: dict[str, list[str]] = {}
     failed: dict[str, str] = {}
+    from nbgrader.api import MissingEntry
+
     with open_gradebook(coursedir) as gb:
         register_assignment(gb, assignment, stubs, written)
         for name in sorted(set(results) | set(entries)):
@@ -662,6 +670,12 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
                 record_submission(gb, assignment, person.student_id, result, stubs, states, timestamp, report,
                                   changed)
                 report.recorded.append((name, person.student_id))
+                if person.student_id != name and (name, person.student_id) not in report.earlier_ids:
+                    try:
+                        gb.find_submission(assignment, name)
+                        report.earlier_ids.append((name, person.student_id))
+                    except MissingEntry:
+                        pass
                 if notebook is not None:
                     atomic_write(place, nbformat.writes(notebook))
                     report.placed.append(place)

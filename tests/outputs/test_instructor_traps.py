@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 from pathlib import Path
 
 import nbformat
@@ -37,8 +38,18 @@ def test_a_student_id_with_a_space_is_recorded_and_exported_under_that_id(fixtur
 
     report = gradebook.sync("fx", folder, out, root)
     assert sorted(s for _, s in report.recorded) == ["Mallory Smith", "alice"]
+    assert report.warnings() == []
     with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
         assert sorted(s.id for s in gb.students) == ["Mallory Smith", "alice"], "no new student under the safe name"
+        gb.add_student(safe)  # what the sync before this fix recorded: named, so it can be removed
+        with warnings.catch_warnings():  # nbgrader's add_submission builds rows before adding them: SAWarnings
+            warnings.simplefilter("ignore")
+            gb.add_submission("fx", safe)
+    assert any(safe in w and "Mallory Smith" in w and "student remove" in w
+               for w in gradebook.sync("fx", folder, out, root).warnings())
+    with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
+        gb.remove_submission("fx", safe)
+        gb.remove_student(safe)
     assert grades_of(root, "Mallory Smith")["Counter"] == (2, None, False)
     assert (root / "autograded" / "Mallory Smith" / "fx" / "fx.ipynb").is_file()
     assert json.loads((out / "_students.json").read_text())[safe] == ["Mallory Smith"]
