@@ -3,9 +3,13 @@
 Instructor notebooks live in ``solutions/<id>/<id>.ipynb`` and the generated
 student notebooks in ``assignments/<id>/<id>.ipynb`` (``make assignments``).
 """
+import os
+
 c = get_config()  # noqa: F821  (injected by nbgrader)
 
-c.CourseDirectory.root = "."
+# The folder of this file, absolute: nbgrader would take "." from wherever it runs, with a warning from each
+# of its apps at every command.
+c.CourseDirectory.root = os.path.dirname(os.path.abspath(__file__))
 c.CourseDirectory.source_directory = "solutions"
 c.CourseDirectory.release_directory = "assignments"
 c.CourseDirectory.db_url = "sqlite:///.nbgrader/gradebook.db"
