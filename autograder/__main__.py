@@ -197,6 +197,10 @@ def _cmd_prairielearn(args: argparse.Namespace) -> int:
     from autograder.outputs.prairielearn import question_files, run
 
     if args.question_files is not None:
+        if not args.image:
+            raise SystemExit("--question-files needs --image <account>/rlcourse-grader:<term>, the grading image you "
+                             "built from docker/grader/Dockerfile and pushed to Docker Hub, where PrairieLearn pulls "
+                             "it from (docs/instructors.md, PrairieLearn)")
         for path in question_files(args.assignment, args.question_files, image=args.image, timeout=args.timeout):
             print(f"wrote {path}")
         return 0
@@ -332,7 +336,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--root", type=Path, default=Path("/grade"), help="PrairieLearn's grading folder")
     p.add_argument("--question-files", type=Path, default=None, metavar="COURSE_DIR",
                    help="instead of grading, write the question's info.json, question.html and run.sh here")
-    p.add_argument("--image", default="rlcourse-grader", help="the grading image named in info.json")
+    p.add_argument("--image", default=None, metavar="ACCOUNT/rlcourse-grader:TERM",
+                   help="with --question-files (required there): the grading image you built and pushed to Docker Hub, "
+                        "named in info.json")
     p.add_argument("--timeout", type=int, default=None, metavar="SECONDS",
                    help="the question's grading timeout (default: the submission's limit plus 60 s; at most 600)")
     p.set_defaults(fn=_cmd_prairielearn)

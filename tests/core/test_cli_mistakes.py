@@ -48,6 +48,7 @@ def test_export_from_a_folder_that_is_not_a_course_says_so_and_writes_nothing(tm
     (["run", "nowhere.ipynb"], "no such notebook"),
     (["run", str(REPO / "solutions/hw0_setup/hw0_setup.ipynb"), "-p", "FAST"], "NAME=VALUE"),
     (["samples", "hw9"], "unknown or ungradable assignment 'hw9'"),
+    (["prairielearn", "hw1_imitation", "--question-files", "/nonexistent/pl-course"], "needs --image <account>/"),
 ])
 def test_authoring_commands_name_the_mistake(command, why):
     with pytest.raises(SystemExit, match=why):
