@@ -153,8 +153,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         version = course.suite_version(assignment)
         older = [r.submission for r in results if r.suite_version and r.suite_version != version]
         if older:
-            print(f"{len(older)} result(s) were graded by an earlier version of {assignment}'s suite, so the gradebook "
-                  f"mixes two suites: python -m autograder regrade {assignment} {shlex.quote(str(args.folder))} --out "
+            state = ("so the gradebook mixes two suites" if len(older) < len(results) else
+                     "every result in the gradebook: none is by this version")
+            print(f"{len(older)} result(s) were graded by an earlier version of {assignment}'s suite, {state}: "
+                  f"python -m autograder regrade {assignment} {shlex.quote(str(args.folder))} --out "
                   f"{shlex.quote(str(out))} grades them "
                   f"all with this one, keeping the earlier results: {_listed(older)}", file=sys.stderr)
         unreadable = [r.submission for r in results if r.status == UNGRADABLE]

@@ -3,7 +3,7 @@
 # when every shard has succeeded (a shard whose grader failed on a submission exits non-zero: submit
 # again and only what is missing is graded).
 #   deploy/slurm/submit.sh ID SUBMISSIONS OUT N [sbatch options, for both jobs...]
-# e.g. deploy/slurm/submit.sh hw1_imitation submitted/hw1_imitation grading/hw1_imitation 8 --partition=cpu
+# e.g. deploy/slurm/submit.sh hw1_imitation submitted grading/hw1_imitation 8 --partition=cpu
 set -euo pipefail
 if [ $# -lt 4 ]; then echo "usage: $0 ID SUBMISSIONS OUT N [sbatch options...]" >&2; exit 2; fi
 here=$(cd "$(dirname "$0")" && pwd)
