@@ -148,16 +148,34 @@ class SuitePlugin:
                 pass
 
     @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_setup(self, item: pytest.Item):
+        """The test's fixtures, bounded as its body is: the ``student`` fixture asks the worker to stand the
+        reference in for the stubs this one calls, and a hostile worker can answer with callbacks into the grader."""
+        with self._bounded(item):
+            yield
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_teardown(self, item: pytest.Item, nextitem: pytest.Item | None):
+        """The fixtures' end (the worker restores the stubs stood in for), bounded as the body is."""
+        with self._bounded(item):
+            yield
+
+    def _bounded(self, item: pytest.Item) -> contextlib.AbstractContextManager:
+        """The grader's own work for ``item``: at most the test's time limit (its own, else ``test_seconds``),
+        stretched as a fair deadline may be, and ``trusted_bytes`` more memory."""
+        if self.session is None:
+            return contextlib.nullcontext()
+        limits = self.session.limits
+        seconds = self.test_limits.get(item.nodeid) or limits.test_seconds
+        return bounded(seconds * CPU_WAIT_STRETCH, limits.trusted_bytes)
+
+    @pytest.hookimpl(hookwrapper=True)
     def pytest_runtest_call(self, item: pytest.Item):
         """The test's body, with the grader's own work for it bounded in time and memory (``trusted_work``)."""
         start, cpu, wait = time.perf_counter(), time.thread_time(), _own_run_delay()
         try:
-            if self.session is None:
+            with self._bounded(item):
                 yield
-            else:
-                limits = self.session.limits
-                with bounded(limits.test_seconds * CPU_WAIT_STRETCH, limits.trusted_bytes):
-                    yield
         finally:
             stats = self.test_stats.setdefault(item.nodeid, {})
             stats.update(seconds=time.perf_counter() - start, grader_cpu=time.thread_time() - cpu)
@@ -293,6 +311,8 @@ class Grader:
             value = self.reference_ns[name](*args, **kwargs)
             out_tree, out_blobs = encode(value)
             return {"ok": True, "value": out_tree}, out_blobs
+        except TrustedWorkTimeout:  # the test's bound on the grader's work: it ends the test, not just this call
+            raise
         except Exception as err:  # noqa: BLE001 - reported to the student's code as an exception
             return {"ok": False, "error": f"{type(err).__name__}: {str(err)[:REFERENCE_ERROR_CHARS]}"}, []
 

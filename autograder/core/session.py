@@ -252,6 +252,11 @@ class Namespace:
         return f"<{self._label} namespace>"
 
 
+WORKER_DATA_ERRORS = (ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError, RecursionError)
+"""Exceptions that reading, decoding or dispatching the worker's messages may raise on data no honest worker
+sends (the wire turns what it foresees into :class:`ProtocolError`; these are the rest)."""
+
+
 def _decode_reply(transport: Transport, header: dict[str, Any], blobs: list[bytes]) -> Any:
     if header.get("ok") is not True:
         raise StudentError(str(header.get("kind", "Error"))[:KIND_CHARS], str(header.get("error", "unknown error"))[:ERROR_CHARS])
@@ -548,9 +553,11 @@ class Session(Transport):
             raise SandboxFailure("crashed the sandbox (the process exited or was killed: out of memory, "
                                  "os._exit, a signal, or a resource limit)"
                                  + (f"; its last output: {tail[-TAIL_QUOTED:]}" if tail else "")) from None
-        except ProtocolError as err:
+        except (ProtocolError, *WORKER_DATA_ERRORS) as err:
+            # Everything read in this exchange came from the worker, the student's process: data the grader cannot
+            # take (a malformed callback, a header it cannot parse) is the submission's failure, never a grader fault.
             self.worker.kill()
-            raise SandboxFailure(f"sent malformed data back to the grader ({err})") from None
+            raise SandboxFailure(f"sent malformed data back to the grader ({str(err)[:TAIL_QUOTED]})") from None
         finally:
             self.pair.release()
             credit = deadline.credit()
@@ -565,6 +572,8 @@ class Session(Transport):
             raise ProtocolError("malformed callback")
         if "reference" in callback:
             name = callback["reference"]
+            if type(name) is not str:
+                raise ProtocolError("malformed callback: a reference's name must be a string")
             if self.reference_call is None or name not in self.standing_in:
                 return {"ok": False, "error": f"`{name}` is not available from the grader now"}, []
             self.reference_calls += 1
@@ -584,7 +593,7 @@ class Session(Transport):
             args, kwargs = decode(tree, blobs, _refuse_objects)
             out_tree, out_blobs = encode(self.call_lent(id, method, args, kwargs))
             return {"ok": True, "value": out_tree}, out_blobs
-        except ProtocolError:
+        except (ProtocolError, TrustedWorkTimeout):
             raise
         except Exception as err:  # noqa: BLE001 - bad arguments from student code: its exception, not the grader's
             return {"ok": False, "error": f"{type(err).__name__}: {str(err)[:TAIL_QUOTED]}"}, []

@@ -289,7 +289,10 @@ def decode(tree: Any, blobs: list[bytes], from_handle: Callable[[int, str], Any]
         if tag == "$tensor" and not rest:
             import torch
 
-            return torch.from_numpy(_npy_array(blob(body)).copy())
+            try:
+                return torch.from_numpy(_npy_array(blob(body)).copy())
+            except (TypeError, ValueError) as err:  # a dtype or byte order torch does not take
+                raise ProtocolError(f"bad tensor data: {str(err)[:QUOTED_CHARS]}") from None
         if tag == "$lent" and from_lent is not None and not rest and type(body) is dict:
             methods, attrs = body.get("methods"), dec(body.get("attrs"), d + 1)
             if type(body.get("id")) is not int or type(methods) is not list or type(attrs) is not dict:
@@ -501,7 +504,7 @@ class FrameReader:
             raise ProtocolError(f"a message header holds more than {MAX_HEADER_VALUES} values")
         try:
             header = _decode_header(text)
-        except (json.JSONDecodeError, RecursionError):
+        except (ValueError, RecursionError):  # JSONDecodeError, or an integer of more digits than Python parses
             raise ProtocolError("message header is not JSON") from None
         if type(header) is not dict or type(header.get("nblobs")) is not int or not 0 <= header["nblobs"] < MAX_BLOBS:
             raise ProtocolError("message header is malformed")
