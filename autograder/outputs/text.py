@@ -19,7 +19,10 @@ MESSAGE_CHARS, NOTE_CHARS, NAME_CHARS = 2000, 600, 200
 QUOTE = "    | "
 """Each line of a failure's message in plain text starts with this, so no student text can pass
 for a line of the grader's (a check mark, a score)."""
-_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\u200b-\u200f\ufeff]")
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\u200b-\u200f\ufeff"
+                      # invisible or blank characters (soft hyphen, joiners, fillers, selectors, tags)
+                      r"\u00ad\u034f\u061c\u115f\u1160\u17b4\u17b5\u180b-\u180f\u2060-\u2065\u3164\ufe00-\ufe0f"
+                      r"\uffa0\U0001d173-\U0001d17a\U000e0000-\U000e0fff]")
 _MARKDOWN = re.compile(r"([\\`*_{}\[\]()#+!|<>~&$:=-])")
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r", "|", "%")
 

@@ -76,3 +76,15 @@ def test_gradescope_and_prairielearn_write_results_for_hostile_text(open_tmp, mo
     assert prairielearn.run("fx", pl) == 0
     results = json.loads(_readable(pl / "results" / "results.json"))
     assert results["gradable"] is True and len(json.dumps(results)) < 1_000_000
+
+
+@pytest.mark.parametrize("hidden", ["\u00ad", "\u034f", "\u115f", "\u180e", "\u2060", "\u2064", "\u3164", "\ufe0f",
+                                    "\U000e0041", "\U000e007f"])
+def test_invisible_characters_are_shown_as_question_marks(hidden):
+    """Red team B passed Unicode tags, joiners and fillers through into feedback.md and results.json: text that
+    shows nothing where a student wrote something. Visible text (accents, emoji) is kept."""
+    from autograder.outputs.text import markdown_text, plain
+
+    assert plain(f"score{hidden}8/8") == "score?8/8"
+    assert hidden not in markdown_text(f"a{hidden}b")
+    assert plain("é 😀 ∑") == "é 😀 ∑"
