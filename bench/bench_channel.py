@@ -66,7 +66,7 @@ REPEATS = 5
 PIECE_ITERATIONS = 20_000
 KEYS = ("grader_cpu", "grader_process_cpu", "worker_cpu", "wall", "worker_run_delay")
 """Per round trip: the grader's main thread's CPU (the channel's work), its whole process's (with the output drain
-and the memory guard threads), the worker's CPU, wall time, and the worker's wait for a CPU."""
+and the tree guard threads), the worker's CPU, wall time, and the worker's wait for a CPU."""
 TARGET_US = 50.0
 """The issue's aim: at most this much worker-to-grader overhead (both sides' CPU) per lent round trip."""
 
