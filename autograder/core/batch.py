@@ -105,13 +105,13 @@ def _contents_digest(path: Path, limit: int = 1000) -> str:
                 break
     for item, st in items[:limit]:
         digest.update(f"{item.relative_to(path)}\0{stat.S_IFMT(st.st_mode)}\0{st.st_size}\0".encode("utf-8", "surrogateescape"))
-        if stat.S_ISREG(st.st_mode) and st.st_size <= MAX_DIGESTED_BYTES:
-            try:
-                digest.update(notebook_digest(item).encode())
-            except OSError:
-                pass
-        elif stat.S_ISLNK(st.st_mode):
-            digest.update(os.fsencode(os.readlink(item)))
+        try:
+            if stat.S_ISREG(st.st_mode) and st.st_size <= MAX_DIGESTED_BYTES:
+                digest.update(notebook_digest(item).encode())  # a SHA-256 of the file's bytes
+            elif stat.S_ISLNK(st.st_mode):
+                digest.update(os.fsencode(os.readlink(item)))
+        except OSError:  # unreadable: its name, kind and size stand for it
+            pass
     return digest.hexdigest()
 
 
