@@ -98,9 +98,9 @@ def _warn_isolation(level: str) -> None:
 
 def _listed(names: list[str], shown: int = 20) -> str:
     """Names for a line of the batch's report: the first ``shown``, made inert, and how many more."""
-    from autograder.outputs.text import plain
+    from autograder.outputs.text import listed, plain
 
-    return ", ".join(plain(n) for n in names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+    return listed([plain(n) for n in names], shown)
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:

@@ -22,6 +22,20 @@ def fixture_course(monkeypatch: pytest.MonkeyPatch) -> Path:
     return FIXTURE_COURSE
 
 
+@pytest.fixture(scope="module")
+def fx_grader():
+    """A grader of the fixture course's assignment ``fx``, built once per test module."""
+    from autograder.core.grader import Grader
+
+    saved, course.REPO = course.REPO, FIXTURE_COURSE
+    try:
+        grader = Grader("fx")
+    finally:
+        course.REPO = saved
+    yield grader
+    grader.close()
+
+
 def _open_folder():
     path = Path(tempfile.mkdtemp(prefix="rlcourse-test-", dir="/tmp"))
     path.chmod(0o777)

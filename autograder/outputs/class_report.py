@@ -47,11 +47,11 @@ from pathlib import Path
 
 import numpy as np
 
-from autograder.outputs.batch_output import read_results, read_students
+from autograder.outputs.batch_output import read_results
 from autograder.outputs.similarity import (NEVER_A_GRADE, Pair, StubCode, pair_page, read_stub_code, release_code,
                                            similar_pairs, THRESHOLD)
 from autograder.core.store import atomic_write
-from autograder.outputs.text import cap, csv_cell, markdown_text, plain
+from autograder.outputs.text import cap, csv_cell, listed, markdown_text, plain
 from autograder.core.results import GRADED, GradeResult
 
 REPORT_DIR = "_class_report"
@@ -233,30 +233,20 @@ def written_from_gradebook(assignment: str, results_dir: Path, course_root: Path
                            ) -> tuple[WrittenGrades, dict[str, float]]:
     """Per synced submission, its written answers' scores in the course's gradebook (None while one waits), and
     each answer's points; empty when the batch was never synced."""
-    students = read_students(results_dir)
-    if not students:
-        return {}, {}
-    from nbgrader.api import MissingEntry
-
-    from autograder.outputs.gradebook import course_directory, open_gradebook
+    from autograder.outputs.gradebook import synced_grades
 
     out: WrittenGrades = {}
     maxima: dict[str, float] = {}
-    with open_gradebook(course_directory(course_root)) as gb:
-        for name, ids in students.items():
-            try:
-                submitted = gb.find_submission_notebook(assignment, assignment, ids[0])
-            except (MissingEntry, IndexError):
+    for name, grades in synced_grades(assignment, results_dir, course_root):
+        per = {}
+        for g in grades:
+            if g.cell_type == "code":
                 continue
-            per = {}
-            for g in submitted.grades:
-                if g.cell_type == "code":
-                    continue
-                maxima[g.name] = float(g.max_score)
-                waiting = g.manual_score is None and g.auto_score is None
-                unanswered = g.manual_score is None and g.auto_score is not None and not g.needs_manual_grade
-                per[g.name] = (None if waiting else float(g.score), not unanswered)
-            out[name] = per
+            maxima[g.name] = float(g.max_score)
+            waiting = g.manual_score is None and g.auto_score is None
+            unanswered = g.manual_score is None and g.auto_score is not None and not g.needs_manual_grade
+            per[g.name] = (None if waiting else float(g.score), not unanswered)
+        out[name] = per
     return out, maxima
 
 
@@ -421,15 +411,15 @@ def _intro(report: ClassReport) -> tuple[str, str]:
                f"ungradable and counted at 0); maximum {t.max_total:g} points.")
     errors = t.grader_errors
     left = (f" {len(errors)} submission(s) where the grader failed are left out: they have no score (run the batch "
-            f"again): {', '.join(errors[:20])}" + (f" and {len(errors) - 20} more" if len(errors) > 20 else "") + "."
+            f"again): {listed(errors)}."
             if errors else " The grader failed on no submission.")
     if t.written:
         waiting = int(np.isnan(t.written_scores).sum())
         left += (f" Written answers ({', '.join(t.written)}) from the gradebook are items and in the totals"
                  + (f"; {waiting} not graded yet count 0 there and are left out of their item." if waiting else "."))
     if t.hand_stubs:
-        listed = "; ".join(f"{n}: {', '.join(h)}" for n, h in sorted(t.hand_stubs.items())[:20])
-        left += (f" Stub scores changed by hand in formgrader ({sum(map(len, t.hand_stubs.values()))}: {listed}) "
+        changed = "; ".join(f"{n}: {', '.join(h)}" for n, h in sorted(t.hand_stubs.items())[:20])
+        left += (f" Stub scores changed by hand in formgrader ({sum(map(len, t.hand_stubs.values()))}: {changed}) "
                  "count in the totals, as in export; the per-stub and per-test figures are the hidden tests'.")
     if len(t.suite_versions) > 1:
         left += (f" Warning: these results come from {len(t.suite_versions)} versions of the hidden suite (a "

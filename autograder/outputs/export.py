@@ -40,7 +40,7 @@ from pathlib import Path
 
 from autograder.outputs import late
 from autograder.outputs.gradebook import course_directory, open_gradebook, read_not_recorded
-from autograder.outputs.text import plain
+from autograder.outputs.text import listed, plain
 
 FORMATS = ("plain", "canvas", "moodle")
 ROSTER_NAME = "roster.csv"
@@ -299,8 +299,7 @@ def export(out: Path, course_root: Path | None = None, long: bool = False, fmt: 
     if unknown:
         problems.append(f"{len(unknown)} submission(s) have a deadline but no submission time (no timestamp.txt, no "
                         f":created_at:), so they were not checked for lateness and no late penalty ("
-                        f"{late.describe(plugin)}) was applied: {', '.join(unknown[:30])}"
-                        + (f" and {len(unknown) - 30} more" if len(unknown) > 30 else ""))
+                        f"{late.describe(plugin)}) was applied: {listed(unknown, 30)}")
     reread = [f"{g.assignment} {plain(g.student_id)}: {', '.join(g.reread)}" for g in grades if g.reread]
     if reread:
         problems.append(f"{len(reread)} submission(s) have a score given by hand to a cell whose text changed since "

@@ -31,7 +31,7 @@ from autograder.core import course
 from autograder.outputs.batch_output import read_results, read_students
 from autograder.outputs.gradebook import course_directory, open_gradebook, with_nbgrader_path
 from autograder.core.store import atomic_write
-from autograder.outputs.text import MESSAGE_CHARS, NAME_CHARS, NOTE_CHARS, cap, markdown_text, plain, points
+from autograder.outputs.text import MESSAGE_CHARS, NAME_CHARS, NOTE_CHARS, cap, listed, markdown_text, plain, points
 from autograder.core.batch import safe_name
 from autograder.core.results import GRADER_ERROR, GradeResult
 
@@ -132,10 +132,8 @@ class FeedbackReport:
     def warnings(self) -> list[str]:
         out = []
         if self.pending:
-            named = ", ".join(f"{plain(s)}: {plain(g)}" for s, g in self.pending[:30])
-            more = f" and {len(self.pending) - 30} more" if len(self.pending) > 30 else ""
             out.append(f"warning: {len(self.pending)} written answer(s) are not graded yet and show as 0 in the "
-                       f"feedback (nbgrader's HTML too): {named}{more}. Grade them in formgrader, then run feedback "
+                       f"feedback (nbgrader's HTML too): {listed([f'{plain(s)}: {plain(g)}' for s, g in self.pending], 30)}. Grade them in formgrader, then run feedback "
                        "again.")
         if self.not_graded:
             out.append(f"warning: no feedback for {len(self.not_graded)} submission(s) the grader failed on: "

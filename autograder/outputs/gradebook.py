@@ -43,6 +43,7 @@ import sys
 import unicodedata
 import warnings
 from dataclasses import dataclass, field
+from collections.abc import Iterator
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -53,7 +54,7 @@ from autograder.core.batch import Entry, discover, safe_name, submissions_folder
 from autograder.core.notebook import NotebookError, find_stubs, manual_cells, read_notebook, read_submission
 from autograder.outputs.batch_output import STUDENTS_NAME, read_results, read_students
 from autograder.core.store import atomic_write
-from autograder.outputs.text import markdown_text, plain
+from autograder.outputs.text import listed, markdown_text, plain
 from autograder.core.results import GRADED, GRADER_ERROR, GradeResult, GraderError
 
 GRADESCOPE_METADATA = "submission_metadata.yml"
@@ -121,16 +122,13 @@ class SyncReport:
                 f"course root), then sync again" for old, student in self.earlier_ids]
         if self.other_suite:
             names = sorted(self.other_suite)
-            listed = ", ".join(plain(n) for n in names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
             out.append(f"warning: {len(names)} result(s) recorded here were graded by another version of the suite "
                        f"({', '.join(sorted(set(self.other_suite.values())))}; the current one is {self.suite_now}): "
-                       f"{listed}. Their scores are the old suite's; regrade them all, which records the new ones: "
+                       f"{listed([plain(n) for n in names])}. Their scores are the old suite's; regrade them all, which records the new ones: "
                        f"{self.regrade_command}")
         if self.reread:
-            named = ", ".join(f"{plain(s)}: {plain(c)}" for s, c in self.reread[:30])
-            more = f" and {len(self.reread) - 30} more" if len(self.reread) > 30 else ""
             out.append(f"warning: {len(self.reread)} score(s) given by hand are of a cell whose text changed since "
-                       f"(the notebook was handed in again): {named}{more}. They are marked as needing a grade "
+                       f"(the notebook was handed in again): {listed([f'{plain(s)}: {plain(c)}' for s, c in self.reread], 30)}. They are marked as needing a grade "
                        "again in formgrader, and export counts the earlier score until a person grades them.")
         return out
 
@@ -692,25 +690,32 @@ HandStubs = dict[str, tuple[float | None, float]]
 """Per stub a person changed in formgrader: ``(manual_score or None, extra_credit or 0)``."""
 
 
-def hand_stub_scores(assignment: str, results_dir: Path, course_root: Path | None = None) -> dict[str, HandStubs]:
-    """Per synced submission of ``results_dir`` (its first student's grades), the stub scores a person changed
-    in formgrader (a score or extra credit on a stub's cell); empty before any sync. ``export`` counts them."""
+def synced_grades(assignment: str, results_dir: Path, course_root: Path | None = None) -> Iterator[tuple[str, list]]:
+    """Per synced submission of ``results_dir``: its name and the grades of its first student's notebook in the
+    course's gradebook (nothing before any sync)."""
     from nbgrader.api import MissingEntry
 
     students = read_students(results_dir)
     if not students:
-        return {}
-    out: dict[str, HandStubs] = {}
+        return
     with open_gradebook(course_directory(course_root)) as gb:
         for name, ids in students.items():
             try:
                 submitted = gb.find_submission_notebook(assignment, assignment, ids[0])
             except (MissingEntry, IndexError):
                 continue
-            changed = {g.name: (g.manual_score, g.extra_credit or 0.0) for g in submitted.grades
-                       if g.cell_type == "code" and (g.manual_score is not None or g.extra_credit)}
-            if changed:
-                out[name] = changed
+            yield name, submitted.grades
+
+
+def hand_stub_scores(assignment: str, results_dir: Path, course_root: Path | None = None) -> dict[str, HandStubs]:
+    """Per synced submission of ``results_dir`` (its first student's grades), the stub scores a person changed
+    in formgrader (a score or extra credit on a stub's cell); empty before any sync. ``export`` counts them."""
+    out: dict[str, HandStubs] = {}
+    for name, grades in synced_grades(assignment, results_dir, course_root):
+        changed = {g.name: (g.manual_score, g.extra_credit or 0.0) for g in grades
+                   if g.cell_type == "code" and (g.manual_score is not None or g.extra_credit)}
+        if changed:
+            out[name] = changed
     return out
 
 

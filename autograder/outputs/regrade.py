@@ -33,6 +33,7 @@ from autograder.core.batch import GRADEBOOK_NAME, discover
 from autograder.outputs.files import grade_folder
 from autograder.outputs.gradebook import HandStubs, hand_stub_delta, hand_stub_scores
 from autograder.outputs.batch_output import read_results, read_students
+from autograder.outputs.text import listed
 from autograder.core.store import RESULT_NAME, archive_results
 from autograder.core.results import GRADED, GRADER_ERROR, GradeResult
 
@@ -124,8 +125,7 @@ def diff_lines(before: dict[str, GradeResult], after: dict[str, GradeResult]) ->
     lines = change_lines(compare(before, after, both))
 
     def only(names: set[str]) -> str:
-        listed = ", ".join(sorted(names)[:10]) + (f" and {len(names) - 10} more" if len(names) > 10 else "")
-        return f"{len(names)} only in the {{}} one" + (f" (not compared: {listed})" if names else "")
+        return f"{len(names)} only in the {{}} one" + (f" (not compared: {listed(sorted(names), 10)})" if names else "")
 
     lines.append(f"compared the {len(both)} submission(s) in both folders; "
                  + only(set(after) - set(before)).format("new") + ", " + only(set(before) - set(after)).format("old"))
@@ -194,10 +194,9 @@ def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None
     if only:
         stale = other_suite_versions(assignment, before, names)
         if stale:
-            listed = ", ".join(sorted(stale)[:10]) + (f" and {len(stale) - 10} more" if len(stale) > 10 else "")
             raise SystemExit(
                 f"refused, nothing written: {assignment}'s suite changed since {len(stale)} other submission(s) were "
-                f"graded ({listed}; suite {sorted(set(stale.values()))[0]}, now {course.suite_version(assignment)}). "
+                f"graded ({listed(sorted(stale), 10)}; suite {sorted(set(stale.values()))[0]}, now {course.suite_version(assignment)}). "
                 f"Regrading only {', '.join(names)} would mix two suites in {out_dir / GRADEBOOK_NAME} and the "
                 f"gradebook. Regrade them all: python -m autograder regrade {assignment} {folder} --out {out_dir}")
     kept = archive(out_dir, [n for n in names if n in before])

@@ -40,6 +40,13 @@ def plain(text: object) -> str:
     return _CONTROL.sub("?", encodable(str(text)))
 
 
+def listed(names: list[str], shown: int = 20) -> str:
+    """The first ``shown`` of ``names`` joined by commas, and how many more there are: a warning names whom it is
+    about without growing with the class."""
+    names = list(names)
+    return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
 def one_line(text: object) -> str:
     """``text`` as :func:`plain`, on one line (newlines shown as ⏎)."""
     return plain(text).replace("\n", " ⏎ ").replace("\t", " ")

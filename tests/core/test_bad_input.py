@@ -6,24 +6,10 @@ import json
 import nbformat
 import pytest
 
-from autograder.core.grader import Grader
 from conftest import FIXTURE_COURSE, with_cells
 
 SOLUTION = FIXTURE_COURSE / "solutions/fx/fx.ipynb"
 RELEASE = FIXTURE_COURSE / "assignments/fx/fx.ipynb"
-
-
-@pytest.fixture(scope="module")
-def grader():
-    from autograder.core import course
-
-    saved, course.REPO = course.REPO, FIXTURE_COURSE
-    try:
-        g = Grader("fx")
-    finally:
-        course.REPO = saved
-    yield g
-    g.close()
 
 
 def solved_copy(tmp_path, name="solved.ipynb"):
@@ -42,76 +28,76 @@ def solved_copy(tmp_path, name="solved.ipynb"):
     (b'[1, 2, 3]', "not a Jupyter notebook"),
     (b'{"cells": 5, "nbformat": 4, "nbformat_minor": 5, "metadata": {}}', "damaged"),
 ])
-def test_unreadable_files_are_ungradable_with_a_reason(grader, tmp_path, content, message):
+def test_unreadable_files_are_ungradable_with_a_reason(fx_grader, tmp_path, content, message):
     path = tmp_path / "bad.ipynb"
     path.write_bytes(content)
-    result = grader.grade(path)
+    result = fx_grader.grade(path)
     assert result.error and message in result.error
     assert result.score == 0 and result.max_score == 7  # every test is listed, at zero
 
 
-def test_a_huge_notebook_is_refused_before_parsing(grader, tmp_path):
+def test_a_huge_notebook_is_refused_before_parsing(fx_grader, tmp_path):
     path = tmp_path / "huge.ipynb"
     with path.open("w") as f:
         f.write('{"cells": [{"cell_type": "markdown", "metadata": {}, "source": "')
         for _ in range(200):
             f.write("x" * 1024 * 1024)
         f.write('"}], "nbformat": 4, "nbformat_minor": 5, "metadata": {}}')
-    result = grader.grade(path)
+    result = fx_grader.grade(path)
     assert "MB" in result.error and "limit" in result.error
 
 
-def test_stripped_metadata_and_reordered_cells_still_grade_fully(grader, tmp_path):
+def test_stripped_metadata_and_reordered_cells_still_grade_fully(fx_grader, tmp_path):
     nb = nbformat.read(str(solved_copy(tmp_path)), as_version=4)
     for cell in nb.cells:
         cell.metadata = {}
     nb.cells.reverse()
     path = tmp_path / "stripped.ipynb"
     nbformat.write(nb, str(path))
-    result = grader.grade(path)
+    result = fx_grader.grade(path)
     assert result.score == 7
     assert any("found by the name" in note for note in result.notes)
 
 
-def test_renamed_grade_ids_fall_back_to_the_defined_name(grader, tmp_path):
+def test_renamed_grade_ids_fall_back_to_the_defined_name(fx_grader, tmp_path):
     nb = nbformat.read(str(solved_copy(tmp_path)), as_version=4)
     for cell in nb.cells:
         if "nbgrader" in cell.metadata:
             cell.metadata["nbgrader"]["grade_id"] = "cell-" + str(id(cell))
     path = tmp_path / "renamed.ipynb"
     nbformat.write(nb, str(path))
-    assert grader.grade(path).score == 7
+    assert fx_grader.grade(path).score == 7
 
 
-def test_deleted_cells_cost_only_their_stub(grader, tmp_path):
+def test_deleted_cells_cost_only_their_stub(fx_grader, tmp_path):
     path = with_cells(solved_copy(tmp_path), tmp_path / "deleted.ipynb", {"Counter": None})
-    result = grader.grade(path)
+    result = fx_grader.grade(path)
     by_stub = {s.name: s for s in result.stubs}
     assert result.score == 5 and by_stub["Counter"].score == 0
     assert "no cell defines `Counter`" in by_stub["Counter"].tests[0].message
 
 
-def test_non_utf8_is_read_with_a_note(grader, tmp_path):
+def test_non_utf8_is_read_with_a_note(fx_grader, tmp_path):
     path = solved_copy(tmp_path)
     raw = json.loads(path.read_text())
     raw["cells"][0]["source"] = "# café"
     path.write_bytes(json.dumps(raw, ensure_ascii=False).encode("latin-1"))
-    result = grader.grade(path)
+    result = fx_grader.grade(path)
     assert result.score == 7 and any("UTF-8" in note for note in result.notes)
 
 
-def test_old_format_3_notebooks_are_converted(grader, tmp_path):
+def test_old_format_3_notebooks_are_converted(fx_grader, tmp_path):
     nb3 = {"nbformat": 3, "nbformat_minor": 0, "metadata": {}, "worksheets": [{"cells": [
         {"cell_type": "code", "input": "def mean_of(values):\n    return float(sum(values) / len(values))",
          "language": "python", "outputs": [], "metadata": {}}]}]}
     path = tmp_path / "v3.ipynb"
     path.write_text(json.dumps(nb3))
-    result = grader.grade(path)
+    result = fx_grader.grade(path)
     assert {s.name: s.score for s in result.stubs}["mean_of"] == 1
     assert any("format 3" in note for note in result.notes)
 
 
-def test_an_answer_in_a_new_cell_below_the_untouched_stub_is_the_answer(grader, tmp_path):
+def test_an_answer_in_a_new_cell_below_the_untouched_stub_is_the_answer(fx_grader, tmp_path):
     """Students often leave the stub cell as released and write the function again in a cell below; the
     notebook, run top to bottom, uses the later one, so the grader does too, and says where it took it from.
     A definition *above* the untouched stub is not the answer: running the notebook, the stub replaces it."""
@@ -126,7 +112,7 @@ def test_an_answer_in_a_new_cell_below_the_untouched_stub_is_the_answer(grader, 
         nb.cells.insert(position, nbformat.v4.new_code_cell(answer))
         path = tmp_path / f"answer_at_{position}.ipynb"
         nbformat.write(nb, str(path))
-        result = grader.grade(path)
+        result = fx_grader.grade(path)
         return {"stub": {s.name: s for s in result.stubs}["mean_of"], "notes": result.notes}
 
     below = graded(stub_at + 1)

@@ -7,7 +7,6 @@ import contextlib
 import pytest
 
 from autograder.core import grader as grader_module
-from autograder.core.grader import Grader
 from conftest import FIXTURE_COURSE, with_cells
 
 FIND_WORKER = '''
@@ -26,26 +25,13 @@ ATTACKS = {
 }
 
 
-@pytest.fixture(scope="module")
-def grader():
-    from autograder.core import course
-
-    saved, course.REPO = course.REPO, FIXTURE_COURSE
-    try:
-        g = Grader("fx")
-    finally:
-        course.REPO = saved
-    yield g
-    g.close()
-
-
 @pytest.mark.parametrize("attack", ATTACKS)
-def test_data_the_grader_cannot_take_fails_the_stub_that_sent_it(grader, tmp_path, attack):
+def test_data_the_grader_cannot_take_fails_the_stub_that_sent_it(fx_grader, tmp_path, attack):
     """Each of these raised an exception no handler caught: ``grade`` crashed and ``batch`` recorded a grader
     error, a status any submission could give itself to avoid a zero."""
     code = FIND_WORKER + ATTACKS[attack] + "def mean_of(values):\n    return sum(values) / len(values)\n"
     nb = with_cells(FIXTURE_COURSE / "solutions/fx/fx.ipynb", tmp_path / "attack.ipynb", {"mean_of": code})
-    result = grader.grade(nb)
+    result = fx_grader.grade(nb)
     assert result.status == "graded", result.error
     stubs = {s.name: s for s in result.stubs}
     assert stubs["mean_of"].score == 0
@@ -53,7 +39,7 @@ def test_data_the_grader_cannot_take_fails_the_stub_that_sent_it(grader, tmp_pat
     assert stubs["scaled_sum"].score == stubs["scaled_sum"].max_score
 
 
-def test_the_graders_work_is_bounded_in_a_tests_setup_and_teardown_too(grader, tmp_path, monkeypatch):
+def test_the_graders_work_is_bounded_in_a_tests_setup_and_teardown_too(fx_grader, tmp_path, monkeypatch):
     """A test's fixtures ask the worker to stand the reference in for the stubs the tested one calls, and a
     hostile worker can answer with callbacks that run in the grader: before, only the test's body was bounded
     (a reference looping for minutes, or 4 GB of the grader's memory, from hw2's setup). Every phase of every
@@ -69,17 +55,17 @@ def test_the_graders_work_is_bounded_in_a_tests_setup_and_teardown_too(grader, t
 
     monkeypatch.setattr(grader_module, "bounded", recording)
     nb = with_cells(FIXTURE_COURSE / "solutions/fx/fx.ipynb", tmp_path / "solved.ipynb", {})
-    result = grader.grade(nb)
+    result = fx_grader.grade(nb)
     tests = sum(len(s.tests) for s in result.stubs)
     assert result.score == result.max_score
     assert len(entered) == 3 * tests, (len(entered), tests)  # setup, body, teardown
-    assert set(entered) == {grader.limits.test_seconds * grader_module.CPU_WAIT_STRETCH}
+    assert set(entered) == {fx_grader.limits.test_seconds * grader_module.CPU_WAIT_STRETCH}
 
     class EveryTestHasItsOwn(dict):  # a limits.json naming every test, whatever its id
         def get(self, key, default=None):
             return 7.0
 
     entered.clear()
-    monkeypatch.setattr(grader, "test_limits", EveryTestHasItsOwn({"any": 7.0}))
-    assert grader.grade(nb).score == result.max_score
+    monkeypatch.setattr(fx_grader, "test_limits", EveryTestHasItsOwn({"any": 7.0}))
+    assert fx_grader.grade(nb).score == result.max_score
     assert set(entered) == {7.0 * grader_module.CPU_WAIT_STRETCH}, "a test's own limit bounds the grader's work"
