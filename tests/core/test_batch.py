@@ -236,6 +236,14 @@ def test_what_a_folder_of_notebooks_holds_besides_this_assignments_work_is_named
     assert "hw1_imitation's" in summary_lines(load_result(out / "erin"))[1], "grade's summary says it too"
 
 
+def _batch(folder, out, jobs: int) -> subprocess.CompletedProcess:
+    """``python -m autograder batch hw0_setup FOLDER --out OUT``, which must succeed."""
+    done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(folder), "--out", str(out),
+                           "--jobs", str(jobs)], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done
+
+
 def test_a_notebook_handed_in_again_is_graded_again_and_an_older_suites_results_are_named(open_tmp):
     """Run again after a student handed in anew, the batch grades that notebook (not the recorded result of the
     earlier one), keeps the earlier result in _previous/, and says so; a third run grades nothing. Results of an
@@ -250,10 +258,7 @@ def test_a_notebook_handed_in_again_is_graded_again_and_an_older_suites_results_
     out = open_tmp / "out"
 
     def batch() -> subprocess.CompletedProcess:
-        done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(flat), "--out", str(out),
-                               "--jobs", "2"], capture_output=True, text=True, timeout=600)
-        assert done.returncode == 0, done.stderr[-2000:]
-        return done
+        return _batch(flat, out, jobs=2)
 
     def scores() -> dict[str, str]:
         return {r["submission"]: r["score"] for r in csv.DictReader((out / "gradebook.csv").open())}
@@ -296,10 +301,7 @@ def test_a_submission_with_nothing_to_grade_is_graded_once_it_holds_a_notebook(o
     out = open_tmp / "out"
 
     def batch() -> subprocess.CompletedProcess:
-        done = subprocess.run([sys.executable, "-m", "autograder", "batch", "hw0_setup", str(folder), "--out", str(out),
-                               "--jobs", "1"], capture_output=True, text=True, timeout=600)
-        assert done.returncode == 0, done.stderr[-2000:]
-        return done
+        return _batch(folder, out, jobs=1)
 
     def rows() -> dict[str, dict]:
         return {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}

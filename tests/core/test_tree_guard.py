@@ -3,6 +3,7 @@ shared memory and System V IPC after a red-team batch in which one submission's 
 points)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -28,21 +29,29 @@ def scaled_sum(x):
 '''
 
 
+@contextlib.contextmanager
+def _ready_process(code: str):
+    """A Python process running ``code`` in a session of its own, once it has printed ``ready``; killed with
+    everything it started afterwards."""
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == b"ready"
+        yield proc
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
 def test_tree_bytes_counts_every_descendant():
     code = ("import os, time\nheld = bytearray(64 * 2**20)\n"
             "for _ in range(2):\n    if os.fork() == 0:\n        more = bytearray(64 * 2**20)\n        time.sleep(30)\n"
             "print('ready', flush=True)\ntime.sleep(30)\n")
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
-    try:
-        assert proc.stdout.readline().strip() == b"ready"
+    with _ready_process(code) as proc:
         time.sleep(0.3)
         assert len(tree_guard.tree(proc.pid)) == 3
         held = tree_guard.tree_bytes(proc.pid)
         assert 3 * 64 * 2**20 <= held < 3 * 64 * 2**20 + 200 * 2**20, held
         assert tree_guard.private_bytes(proc.pid) < held - 100 * 2**20, "the children are counted too"
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
 
 
 def _grade_fx(tmp_path, monkeypatch, code: str, **limits):
@@ -110,15 +119,10 @@ def test_memory_files_and_shared_mappings_are_counted():
     code = ("import mmap, os, time\nm = mmap.mmap(-1, 96 * 2**20)\nm.write(b'\\1' * len(m))\n"
             "fd = os.memfd_create('held')\nos.write(fd, b'\\1' * (80 * 2**20))\n"
             "print('ready', flush=True)\ntime.sleep(30)\n")
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
-    try:
-        assert proc.stdout.readline().strip() == b"ready"
+    with _ready_process(code) as proc:
         assert tree_guard.private_bytes(proc.pid) >= 96 * 2**20, "the shared mapping"
         assert tree_guard.memory_file_bytes([proc.pid]) >= 80 * 2**20, "the memory file nothing maps"
         assert tree_guard.tree_bytes(proc.pid) >= 176 * 2**20
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
 
 
 def test_busy_tasks_counts_processes_and_threads_that_want_a_cpu():
@@ -126,16 +130,11 @@ def test_busy_tasks_counts_processes_and_threads_that_want_a_cpu():
             "for _ in range(2):\n    if os.fork() == 0:\n        while True: pass\n"
             "threading.Thread(target=time.sleep, args=(30,), daemon=True).start()\n"
             "print('ready', flush=True)\ntime.sleep(30)\n")
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, start_new_session=True)
-    try:
-        assert proc.stdout.readline().strip() == b"ready"
+    with _ready_process(code) as proc:
         time.sleep(0.2)
         pids = tree_guard.tree(proc.pid)
         looks = [tree_guard.busy_tasks(pids) for _ in range(20)]
         assert max(looks) == 2 and min(looks) >= 1, looks  # two loops; the sleeping parent and thread are not busy
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
 
 
 BUSY_LOOPS = '''
