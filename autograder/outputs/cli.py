@@ -16,6 +16,7 @@ checks that the sandbox would import this checkout's code (:mod:`autograder.outp
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -34,8 +35,6 @@ def _course(p: argparse.ArgumentParser) -> None:
 def _cmd_sync(args: argparse.Namespace) -> int:
     from autograder.outputs.gradebook import course_directory, sync
 
-    import sys
-
     report = sync(args.assignment, args.folder, args.results, args.course)
     print("\n".join(report.lines(args.assignment, course_directory(args.course).db_url)))
     for line in report.warnings():
@@ -48,8 +47,6 @@ GRADER_FAULT_EXIT = 3
 
 
 def _cmd_feedback(args: argparse.Namespace) -> int:
-    import sys
-
     from autograder.outputs.feedback import write_feedback
 
     done = write_feedback(args.assignment, args.results, args.course, html=args.html, zip_dir=args.zip)
@@ -63,8 +60,6 @@ def _cmd_feedback(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    import sys
-
     from autograder.outputs.export import export
     from autograder.outputs.gradebook import course_directory
     from autograder.outputs.text import plain
@@ -99,8 +94,6 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_regrade(args: argparse.Namespace) -> int:
-    import sys
-
     from autograder.outputs.checkout import require_one_checkout
     from autograder.outputs.regrade import change_lines, regrade
     from autograder.outputs.text import plain

@@ -132,8 +132,9 @@ class FeedbackReport:
     def warnings(self) -> list[str]:
         out = []
         if self.pending:
+            answers = listed([f"{plain(s)}: {plain(g)}" for s, g in self.pending], 30)
             out.append(f"warning: {len(self.pending)} written answer(s) are not graded yet and show as 0 in the "
-                       f"feedback (nbgrader's HTML too): {listed([f'{plain(s)}: {plain(g)}' for s, g in self.pending], 30)}. Grade them in formgrader, then run feedback "
+                       f"feedback (nbgrader's HTML too): {answers}. Grade them in formgrader, then run feedback "
                        "again.")
         if self.not_graded:
             out.append(f"warning: no feedback for {len(self.not_graded)} submission(s) the grader failed on: "

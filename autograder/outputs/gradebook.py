@@ -124,12 +124,13 @@ class SyncReport:
             names = sorted(self.other_suite)
             out.append(f"warning: {len(names)} result(s) recorded here were graded by another version of the suite "
                        f"({', '.join(sorted(set(self.other_suite.values())))}; the current one is {self.suite_now}): "
-                       f"{listed([plain(n) for n in names])}. Their scores are the old suite's; regrade them all, which records the new ones: "
-                       f"{self.regrade_command}")
+                       f"{listed([plain(n) for n in names])}. Their scores are the old suite's; regrade them all, "
+                       f"which records the new ones: {self.regrade_command}")
         if self.reread:
+            cells = listed([f"{plain(s)}: {plain(c)}" for s, c in self.reread], 30)
             out.append(f"warning: {len(self.reread)} score(s) given by hand are of a cell whose text changed since "
-                       f"(the notebook was handed in again): {listed([f'{plain(s)}: {plain(c)}' for s, c in self.reread], 30)}. They are marked as needing a grade "
-                       "again in formgrader, and export counts the earlier score until a person grades them.")
+                       f"(the notebook was handed in again): {cells}. They are marked as needing a grade again in "
+                       "formgrader, and export counts the earlier score until a person grades them.")
         return out
 
 

@@ -196,7 +196,8 @@ def regrade(assignment: str, folder: Path, out_dir: Path, only: list[str] | None
         if stale:
             raise SystemExit(
                 f"refused, nothing written: {assignment}'s suite changed since {len(stale)} other submission(s) were "
-                f"graded ({listed(sorted(stale), 10)}; suite {sorted(set(stale.values()))[0]}, now {course.suite_version(assignment)}). "
+                f"graded ({listed(sorted(stale), 10)}; suite {sorted(set(stale.values()))[0]}, now "
+                f"{course.suite_version(assignment)}). "
                 f"Regrading only {', '.join(names)} would mix two suites in {out_dir / GRADEBOOK_NAME} and the "
                 f"gradebook. Regrade them all: python -m autograder regrade {assignment} {folder} --out {out_dir}")
     kept = archive(out_dir, [n for n in names if n in before])
