@@ -46,6 +46,9 @@ def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str]
     of the assignment's stubs has its zeros and, as its reason, what it seems to be (another assignment's, say)."""
     results = list(results)
     stubs = list(dict.fromkeys([*stubs, *(s.name for r in results for s in r.stubs)]))
+    # A submission found ungradable before any test ran has no stubs: it is out of the assignment's points all the
+    # same (those of the graded results; left empty when the batch graded none).
+    full = max((r.max_score for r in results if r.stubs), default=None)
     rows = [["submission", "score", "max_score", "percent", *stubs, "status", "reason"]]
     for r in sorted(results, key=lambda r: r.submission):
         reason = csv_cell(cap(r.error or r.wrong_notebook or "", NOTE_CHARS))
@@ -53,9 +56,10 @@ def write_gradebook(results: Iterable[GradeResult], path: Path, stubs: list[str]
             rows.append([csv_cell(r.submission), "", "", "", *[""] * len(stubs), r.status, reason])
             continue
         per = {s.name: s.score for s in r.stubs}
-        percent = 100 * r.score / r.max_score if r.max_score else 0.0
-        rows.append([csv_cell(r.submission), points(r.score), points(r.max_score), f"{percent:.1f}",
-                     *[points(per.get(s, 0)) for s in stubs], r.status, reason])
+        max_score = r.max_score if r.stubs else full
+        percent = 100 * r.score / max_score if max_score else 0.0
+        rows.append([csv_cell(r.submission), points(r.score), "" if max_score is None else points(max_score),
+                     f"{percent:.1f}", *[points(per.get(s, 0)) for s in stubs], r.status, reason])
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
     path.parent.mkdir(parents=True, exist_ok=True)

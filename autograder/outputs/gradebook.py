@@ -14,8 +14,9 @@ nbgrader-sync ID FOLDER --results DIR``) writes, through ``nbgrader.api.Gradeboo
   its safe name and named in a warning), the submission with its time when the layout records
   one (nbgrader's ``timestamp.txt``, Gradescope's ``:created_at:``), the autograder's score of
   each stub as the grade's ``auto_score`` and the tests' outcomes as its ``auto_comment``;
-  a written answer left as released (or a submission with no notebook) gets ``auto_score`` 0,
-  any other written answer waits for a person (``needs_manual_grade``);
+  a written answer left as released (or a submission with no notebook, or one missing from another
+  assignment's notebook handed in by mistake) gets ``auto_score`` 0, any other written answer waits for a
+  person (``needs_manual_grade``);
 - the submitted notebook, placed at ``autograded/<student>/<assignment>/<assignment>.ipynb``
   of the nbgrader course, where formgrader opens it (see :func:`formgrader_notebook`).
 
@@ -591,7 +592,11 @@ def record_submission(gb, assignment: str, student: str, result: GradeResult, st
         grade = grades[gid]
         if grade.manual_score is not None:
             continue  # graded by a person: theirs to change
-        unanswered = state == "unanswered" or result.status != GRADED
+        # Another assignment's notebook has no answer to this question anywhere: nothing waits for a person.
+        elsewhere = state == "missing" and bool(result.wrong_notebook)
+        if elsewhere and gid in comments:
+            comments[gid].auto_comment = f"Not answered: {_inert(_line(result.wrong_notebook))}"
+        unanswered = state == "unanswered" or result.status != GRADED or elsewhere
         grade.auto_score = 0.0 if unanswered else None
         grade.needs_manual_grade = not unanswered
         report.waiting += not unanswered

@@ -15,7 +15,8 @@ import nbformat
 
 from autograder.core.batch import safe_name
 from autograder.outputs import export, feedback, gradebook
-from autograder.outputs.files import write_outputs
+from autograder.core.results import UNGRADABLE, GradeResult
+from autograder.outputs.files import write_gradebook, write_outputs
 from test_term import POINTS, empty_gradebook, graded, grades_of, give, new_course, submission, term  # noqa: F401
 
 
@@ -190,3 +191,35 @@ def test_sync_warns_when_results_were_graded_by_a_suite_other_than_the_current_o
     stale = [w for w in report.warnings() if "suite" in w]
     assert len(stale) == 1 and "2 result(s)" in stale[0] and "0123456789abcdef" in stale[0]
     assert "alice" in stale[0] and "carol" not in stale[0] and "regrade fx" in stale[0]
+
+
+# ------------------------------------------------------------------ another assignment's notebook, or none at all
+
+def test_a_written_answer_missing_from_another_assignments_notebook_waits_for_nobody(term):
+    folder, out, root = term
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("def policy(obs):\n    return 0")])
+    nbformat.write(nb, str(folder / "dave.ipynb"))  # hw1's notebook, say, handed in for fx
+    wrong = graded("dave", set())
+    wrong.wrong_notebook = "this notebook defines none of fx's stubs; it seems to be hw1_imitation's"
+    write_outputs(wrong, out / "dave")
+    submission(folder / "bob.ipynb", None)  # fx's own notebook with the answer cell deleted: a person looks
+
+    gradebook.sync("fx", folder, out, root)
+    assert grades_of(root, "dave")["q_why"] == (0, None, False), "nothing of fx's to read: 0, not in the queue"
+    assert grades_of(root, "bob")["q_why"] == (None, None, True), "the answer may be elsewhere in fx's notebook"
+    with gradebook.open_gradebook(gradebook.course_directory(root)) as gb:
+        comments = {c.name: c.auto_comment for c in gb.find_submission_notebook("fx", "fx", "dave").comments}
+    assert "hw1_imitation" in comments["q_why"]
+    give(root, "dave", "q_why", 1.0)  # a person may still grade it; the next sync keeps their score
+    gradebook.sync("fx", folder, out, root)
+    assert grades_of(root, "dave")["q_why"] == (0, 1.0, False)
+
+
+def test_gradebook_csv_gives_a_submission_found_ungradable_before_any_test_the_assignments_maximum(tmp_path):
+    nothing = GradeResult("fx", "eve", [], [], error="no notebook in the submission", status=UNGRADABLE)
+    write_gradebook([graded("alice", {"scaled_sum"}), nothing], tmp_path / "gradebook.csv")
+    rows = {r["submission"]: r for r in csv.DictReader((tmp_path / "gradebook.csv").open())}
+    assert rows["eve"]["max_score"] == rows["alice"]["max_score"] == "7"
+    assert (rows["eve"]["score"], rows["eve"]["percent"], rows["eve"]["status"]) == ("0", "0.0", UNGRADABLE)
+    write_gradebook([nothing], tmp_path / "alone.csv")  # no graded result to take the maximum from: left empty
+    assert next(csv.DictReader((tmp_path / "alone.csv").open()))["max_score"] == ""
