@@ -6,6 +6,11 @@ Prints the Markdown tables that the README shows.
     python bench/bench_hw5_lm_alignment.py --seeds 1 --skip-interop
     python bench/bench_hw5_lm_alignment.py --only-interop     # GPT-2 / TRL checks only (about a minute)
     python bench/bench_hw5_lm_alignment.py --time-notebook    # also time the notebook, FAST and full
+    python bench/bench_hw5_lm_alignment.py --skip-interop --record   # and write bench/results/hw5_lm_alignment.json
+
+With ``--record``, each finished seed is kept in ``bench/results/hw5_lm_alignment.partial.json`` (a run that
+stops resumes there, skipping the seeds it has) and the results file is written when every seed is done: the
+budgets, every method's figures per seed, and the matched-KL frontier the tables print.
 
 Every number comes from the reference solutions in ``solutions/hw5_lm_alignment`` (its setup and stub
 cells, executed here) on the shipped SFT model and preference set, with the notebook's full budgets.
@@ -26,6 +31,11 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bench.run_record import meta  # noqa: E402
+
+RESULTS = REPO / "bench" / "results" / "hw5_lm_alignment.json"
+PARTIAL = REPO / "bench" / "results" / "hw5_lm_alignment.partial.json"
 NOTEBOOK = REPO / "solutions" / "hw5_lm_alignment" / "hw5_lm_alignment.ipynb"
 BENCH_VENV = REPO / ".venv-bench-lm" / "bin" / "python"
 # The notebook's full budgets (its parameters cell with FAST = False).
@@ -113,6 +123,25 @@ def mean_sd(values) -> str:
     return f"{v.mean():+.3f} ± {v.std():.3f}"
 
 
+def frontier(runs: list[dict[str, dict]]) -> list[dict]:
+    """Each trained policy (means over seeds) against best-of-n's gold reward interpolated at the same KL, with
+    best-of-n's KL at its formula log n - (n - 1)/n; ``None`` where the policy's KL is beyond the largest n."""
+    methods = list(runs[0])
+    ns_ = sorted(int(m.split("-")[-1]) for m in methods if m.startswith("best-of"))
+    bon_kl = np.array([0.0] + [np.log(n) - (n - 1) / n for n in ns_])
+    bon_gold = np.array([np.mean([r["SFT"]["gold"] for r in runs])]
+                        + [np.mean([r[f"best-of-{n}"]["gold"] for r in runs]) for n in ns_])
+    rows = []
+    for m in methods:
+        if m.startswith(("PPO", "DPO")):
+            kl, gold = float(np.mean([r[m]["kl"] for r in runs])), float(np.mean([r[m]["gold"] for r in runs]))
+            ref = float(np.interp(kl, bon_kl, bon_gold)) if kl <= bon_kl[-1] else None
+            rows.append({"policy": m, "kl": kl, "gold": gold, "best_of_n_gold_at_kl": ref,
+                         "higher": None if ref is None else (m.split()[0] if gold > ref else "best-of-n"),
+                         "largest_n": ns_[-1], "largest_n_kl": float(bon_kl[-1])})
+    return rows
+
+
 def print_tables(runs: list[dict[str, dict]]) -> None:
     from rlcourse import data
 
@@ -128,25 +157,49 @@ def print_tables(runs: list[dict[str, dict]]) -> None:
     print("\nWall times include training the reward model for best-of-n and PPO; best-of-n's KL is "
           "log n - (n - 1)/n, an upper bound for a discrete policy (equal only for a reward without atoms).")
 
-    # Frontier at matched KL: each trained policy against best-of-n interpolated at the same KL.
-    ns_ = sorted(int(m.split("-")[-1]) for m in methods if m.startswith("best-of"))
-    bon_kl = np.array([0.0] + [np.log(n) - (n - 1) / n for n in ns_])
-    bon_gold = np.array([np.mean([r["SFT"]["gold"] for r in runs])]
-                        + [np.mean([r[f"best-of-{n}"]["gold"] for r in runs]) for n in ns_])
     print("\n### The frontier at matched KL (means over seeds)\n")
     print("| policy | KL (nats) | gold reward | best-of-n at the same KL | higher gold |")
     print("|---|---:|---:|---:|---|")
-    for m in methods:
-        if m.startswith(("PPO", "DPO")):
-            kl, gold = np.mean([r[m]["kl"] for r in runs]), np.mean([r[m]["gold"] for r in runs])
-            if kl > bon_kl[-1]:
-                print(f"| {m} | {kl:.2f} | {gold:+.3f} | beyond best-of-{ns_[-1]} (KL {bon_kl[-1]:.2f}) | n/a |")
-                continue
-            ref = float(np.interp(kl, bon_kl, bon_gold))
-            print(f"| {m} | {kl:.2f} | {gold:+.3f} | {ref:+.3f} | {m.split()[0] if gold > ref else 'best-of-n'} |")
+    for row in frontier(runs):
+        m, kl, gold, ref = row["policy"], row["kl"], row["gold"], row["best_of_n_gold_at_kl"]
+        if ref is None:
+            print(f"| {m} | {kl:.2f} | {gold:+.3f} | beyond best-of-{row['largest_n']} (KL {row['largest_n_kl']:.2f}) "
+                  "| n/a |")
+        else:
+            print(f"| {m} | {kl:.2f} | {gold:+.3f} | {ref:+.3f} | {row['higher']} |")
     info = data.info("lm/sft.pt")["info"]
     print(f"\nSFT model: {info['params']:,} parameters, held-out perplexity {info['valid_perplexity']}, pretraining "
           f"{info['train_minutes']} min wall on this machine ({info['steps']} steps of {info['batch']} reviews).")
+
+
+def _read_partial() -> dict:
+    """The finished seeds of an interrupted ``--record`` run of the same budgets (empty if none or other budgets)."""
+    try:
+        state = json.loads(PARTIAL.read_text())
+    except (OSError, ValueError):
+        return {}
+    return state.get("seeds", {}) if state.get("budget") == _budget_record() else {}
+
+
+def _budget_record() -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in BUDGET.items()}
+
+
+def _save(path: Path, data: dict) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(data, indent=1))
+    tmp.replace(path)
+
+
+def record(runs: dict[str, dict[str, dict]]) -> None:
+    """The results file: budgets, every method per seed, the frontier; the partial file is then removed."""
+    ordered = [runs[k] for k in sorted(runs, key=int)]
+    _save(RESULTS, {"command": "python bench/bench_hw5_lm_alignment.py --skip-interop --record",
+                    "budget": _budget_record(), "evaluation_prompts": BUDGET["N_EVAL"],
+                    "best_of_n_kl": "log n - (n - 1)/n: an upper bound for a discrete policy, not measured",
+                    "seeds": runs, "frontier": frontier(ordered), "meta": meta()})
+    PARTIAL.unlink(missing_ok=True)
+    print(f"recorded {RESULTS}", file=sys.stderr)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -279,6 +332,7 @@ def main() -> None:
     parser.add_argument("--skip-interop", action="store_true")
     parser.add_argument("--only-interop", action="store_true")
     parser.add_argument("--time-notebook", action="store_true")
+    parser.add_argument("--record", action="store_true", help="write bench/results/hw5_lm_alignment.json (resumable)")
     parser.add_argument("--interop-worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.interop_worker:
@@ -289,12 +343,20 @@ def main() -> None:
 
         torch.set_num_threads(1)
         ns = solution_namespace()
-        runs = []
+        done = _read_partial() if args.record else {}
         for seed in range(args.seeds):
+            if str(seed) in done:
+                print(f"seed {seed}: kept from {PARTIAL.name}", file=sys.stderr, flush=True)
+                continue
             t0 = time.perf_counter()
-            runs.append(run_seed(ns, seed))
+            done[str(seed)] = run_seed(ns, seed)
             print(f"seed {seed}: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-        print_tables(runs)
+            if args.record:
+                _save(PARTIAL, {"budget": _budget_record(), "seeds": done})
+        runs = {k: done[k] for k in map(str, range(args.seeds))}
+        print_tables(list(runs.values()))
+        if args.record:
+            record(runs)
     if not args.skip_interop:
         bench_interop()
     if args.time_notebook:
