@@ -413,6 +413,31 @@ def headline_hw6(data: dict) -> Headline:
     return blocks, used
 
 
+def headline_hw5(data: dict) -> Headline:
+    seeds = data.get("seeds")
+    if not is_seed_dict(seeds) or not all(isinstance(m, dict) for m in seeds.values()):
+        return [], set()
+    runs = list(seeds.values())
+    methods = [m for m in runs[0] if all(isinstance(r.get(m), dict) for r in runs)]
+    body = [[cell(m)] + [mean_sd([r[m].get(k) for r in runs]) for k in ("gold", "proxy")]
+            + [f"≤ {fmt(runs[0][m].get('kl'))} (bound)" if m.startswith("best-of") else mean_sd([r[m].get("kl") for r in runs]),
+               mean_sd([r[m].get("seconds") for r in runs])] for m in methods]
+    blocks: list = [f"## Gold reward, proxy reward and KL from the SFT model (mean ± sd over {len(runs)} seeds)",
+                    (table(["method", "gold reward", "proxy reward", "KL (nats)", "wall (s)"], body,
+                           ["---", "---:", "---:", "---:", "---:"]), "")]
+    used = {"seeds"}
+    rows = data.get("frontier")
+    if isinstance(rows, list) and all(isinstance(r, dict) for r in rows):
+        body = [[cell(str(r.get("policy"))), fmt(r.get("kl")), fmt(r.get("gold")),
+                 fmt(r.get("best_of_n_gold_at_kl")) if r.get("best_of_n_gold_at_kl") is not None
+                 else f"beyond best-of-{r.get('largest_n')}", cell(str(r.get("higher") or "n/a"))] for r in rows]
+        blocks += ["## The frontier at matched KL (means over seeds; best-of-n's KL at its formula, an upper bound)",
+                   (table(["policy", "KL (nats)", "gold reward", "best-of-n at the same KL", "higher gold"], body,
+                          ["---", "---:", "---:", "---:", "---"]), "")]
+        used.add("frontier")
+    return blocks, used
+
+
 def headline_test_fast(data: dict) -> Headline:
     if "wall_seconds" not in data:
         return [], set()
@@ -496,6 +521,7 @@ HEADLINES: dict[str, Callable[[dict], Headline]] = {
     "hw1b_multimodal": headline_hw1b,
     "hw4_rlhf_dpo": headline_hw4,
     "hw4_dpo_pairs": headline_hw4_dpo_pairs,
+    "hw5_lm_alignment": headline_hw5,
     "hw6_group_rl": headline_hw6,
     "notebook_budgets": headline_notebook_budgets,
     "test_fast": headline_test_fast,
