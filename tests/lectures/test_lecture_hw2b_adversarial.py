@@ -70,6 +70,39 @@ def test_the_outer_problem_is_solved_by_the_expert():
     assert np.isclose(at_expert, -2 * np.log(2), atol=1e-9) and min(others) > at_expert
 
 
+@checks("eq-gail-objective", "91455be9")
+@checks("eq-gail-js", "2ec3ecc2")
+def test_with_an_entropy_bonus_the_saddle_point_is_not_the_expert():
+    """One state, five actions: the outer problem 2 JS - lambda H (the inner maximum, less 2 log 2) is minimised
+    at the expert with JS = 0 and D* = 1/2 only for lambda = 0; for lambda > 0 its minimiser has more entropy than
+    the expert, JS > 0 and D* != 1/2, and it is the minimiser of JS - (lambda/2) H, not of JS - lambda H."""
+    expert = np.array([0.7, 0.15, 0.1, 0.04, 0.01])
+
+    def entropy(q):
+        return float(-(q * np.log(q)).sum())
+
+    def js(q):                                                  # in nats, written out (scipy's is checked above)
+        m = (expert + q) / 2
+        return float(0.5 * (expert * np.log(expert / m)).sum() + 0.5 * (q * np.log(q / m)).sum())
+
+    def minimiser(weight_js, lam):
+        def outer(z):
+            q = np.exp(z - np.logaddexp.reduce(z))
+            return weight_js * js(q) - lam * entropy(q)
+        z = minimize(outer, np.zeros(5), method="BFGS", options={"gtol": 1e-10}).x
+        return np.exp(z - np.logaddexp.reduce(z))
+
+    at_zero = minimiser(2, 0.0)
+    assert np.allclose(at_zero, expert, atol=1e-4)
+    assert np.allclose(expert / (expert + at_zero), 0.5, atol=1e-4)
+    for lam in (0.2, 0.5):
+        saddle = minimiser(2, lam)
+        assert js(saddle) > 1e-3 and entropy(saddle) > entropy(expert)
+        assert np.abs(expert / (expert + saddle) - 0.5).max() > 0.01
+        assert np.allclose(saddle, minimiser(1, lam / 2), atol=1e-4)
+        assert np.abs(saddle - minimiser(1, lam)).max() > 1e-2, "JS less lambda H is another problem"
+
+
 @checks("eq-gail-rewards", "b092a7a2")
 def test_the_three_rewards_and_where_the_gail_reward_saturates():
     rng = np.random.default_rng(3)
@@ -96,12 +129,13 @@ def test_airl_logit_and_the_soft_rl_problem_it_sets():
     assert np.allclose(np.exp(z - np.logaddexp.reduce(z)), np.exp(f5) / np.exp(f5).sum(), atol=1e-5)
 
 
-def soft_optimal_policy(P, reward, horizon):
-    """Finite-horizon soft value iteration for a reward (S,) or (T, S, A), written out here."""
+def soft_optimal_policy(P, reward, horizon, gamma=1.0):
+    """Finite-horizon soft value iteration (the return and the causal entropy discounted by ``gamma``) for a reward
+    (S,) or (T, S, A), written out here."""
     reward = np.broadcast_to(reward[:, None] if np.ndim(reward) == 1 else reward, (horizon, *P.shape[:2]))
     v, policy = np.zeros(P.shape[0]), np.empty((horizon, *P.shape[:2]))
     for t in reversed(range(horizon)):
-        q = reward[t] + P @ v
+        q = reward[t] + gamma * P @ v
         v = np.logaddexp.reduce(q, axis=1)
         policy[t] = np.exp(q - v[:, None])
     return policy
@@ -130,6 +164,13 @@ def test_shaping_leaves_the_policy_alone():
     per_step = g[batch.states] + h[batch.next_states] - h[batch.states]
     per_step[:, -1] -= h[batch.next_states[:, -1]]
     assert np.allclose(per_step.sum(axis=1), g[batch.states].sum(axis=1) - h[batch.states[:, 0]])
+    # finite horizon, gamma = 0.9 inside f: the same policy when the return is discounted by the same gamma, but
+    # not for the undiscounted sum of f, which keeps -(1 - gamma) sum_{t >= 1} h(s_t)
+    gamma = 0.9
+    f = np.broadcast_to(g[None, :, None] - h[None, :, None] + gamma * mdp.P @ h, (6, 12, 3)).copy()
+    f[-1] = g[:, None] - h[:, None]
+    assert np.allclose(soft_optimal_policy(mdp.P, f, 6, gamma), soft_optimal_policy(mdp.P, g, 6, gamma), atol=1e-10)
+    assert np.abs(soft_optimal_policy(mdp.P, f, 6) - soft_optimal_policy(mdp.P, g, 6)).max() > 1e-3
     # discounted infinite horizon, gamma = 0.9: the same soft-optimal policy too
     gamma = 0.9
     _, log_pi_g = discounted_soft_vi(mdp.P, np.repeat(g[:, None], 3, axis=1), gamma)

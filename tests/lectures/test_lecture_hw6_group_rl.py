@@ -120,6 +120,54 @@ def test_grpo_on_a_pass_fail_reward_reweights_by_one_over_sqrt_p_1_minus_p(p):
     assert not np.isclose(limit, true)
 
 
+def grpo_binary_update(p: float, g: int) -> float:
+    """The exact expected GRPO update of a one-logit pass/fail policy, E[k(G-k)/(G^2 s)] over k ~ Binomial(G, p)."""
+    k = np.arange(g + 1)
+    pk = np.array([comb(g, int(j)) for j in k], dtype=float) * p ** k * (1 - p) ** (g - k)
+    s = np.sqrt(k * (g - k) / (g * (g - 1)))
+    return float((pk * np.where(s > 0, k * (g - k) / (g ** 2 * np.where(s > 0, s, 1.0)), 0.0)).sum())
+
+
+def test_small_groups_blunt_grpos_reweighting_by_the_factors_the_lecture_quotes():
+    """Section "What the normalisations do": the update over the true gradient p(1-p) at G = 4 and 64, as quoted,
+    against a Monte Carlo of GRPO's own advantages; it approaches 1/sqrt(p(1-p)) only as G grows."""
+    text = (Path(__file__).resolve().parents[2] / "lectures" / "08_group_rl.md").read_text()
+    for g, quoted in ((4, {0.1: "1.46", 0.5: "1.40"}), (64, {0.1: "3.23", 0.5: "1.97"})):
+        for p, figure in quoted.items():
+            assert f"{grpo_binary_update(p, g) / (p * (1 - p)):.2f}" == figure and f"${figure}$" in text
+    rng = np.random.default_rng(0)
+    y = (rng.random((200_000, 4)) < 0.1).astype(float)               # groups of four passes and fails at p = 0.1
+    s = y.std(axis=1, ddof=1, keepdims=True)
+    a = np.where(s > 0, (y - y.mean(axis=1, keepdims=True)) / np.where(s > 0, s, 1.0), 0.0)
+    sampled = (a * (y - 0.1)).mean(axis=1)                            # (1/G) sum_i A_i d/dtheta log pi(y_i)
+    assert abs(sampled.mean() - grpo_binary_update(0.1, 4)) < 4 * sampled.std() / np.sqrt(len(sampled))
+    ratios = [grpo_binary_update(0.1, g) / 0.09 for g in (4, 8, 64, 1000)]
+    assert all(np.diff(ratios) > 0) and abs(ratios[-1] - 1 / np.sqrt(0.09)) < 0.01
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_variance_minimising_constant_baseline_is_not_the_expected_reward(seed):
+    """Section "Baselines": b* = E[r |g|^2] / E[|g|^2] minimises E|(r - b) g|^2 (checked by a generic optimiser on a
+    softmax policy); on the one-logit pass/fail policy it is 1 - p, not p, and leaves no variance."""
+    rng = np.random.default_rng(seed)
+    theta, r = rng.normal(size=6), rng.normal(size=6)
+    pi = softmax(theta)
+    score2 = ((np.eye(6) - pi) ** 2).sum(axis=1)                      # |grad log pi(y)|^2 for each answer y
+
+    def second_moment(b):
+        return float(pi @ ((r - b) ** 2 * score2))
+
+    best = minimize_scalar(second_moment).x
+    assert np.isclose(best, pi @ (r * score2) / (pi @ score2), atol=1e-6)
+    assert second_moment(best) <= second_moment(pi @ r)
+    for p in (0.1, 0.5, 0.9):                                         # pass (r = 1, score 1 - p) and fail (r = 0, -p)
+        prob, reward, score = np.array([p, 1 - p]), np.array([1.0, 0.0]), np.array([1 - p, -p])
+        b_star = prob @ (reward * score ** 2) / (prob @ score ** 2)
+        assert np.isclose(b_star, 1 - p) and (p == 0.5 or not np.isclose(b_star, prob @ reward))
+        per_sample = (reward - b_star) * score
+        assert np.allclose(per_sample, p * (1 - p)), "every sample gives the true gradient"
+
+
 def _losses(lp, lp_old, lp_ref, adv, mask, eps, beta, t_const):
     ratio = torch.exp(lp - lp_old)
     a = adv[:, None]

@@ -112,6 +112,30 @@ def test_filtered_likelihood_gradient_is_the_gradient_of_log_pass_rate():
     assert np.allclose(filtered, (pi * (r - pi @ r)) / (pi @ r), atol=1e-12)      # grad P / P
 
 
+@pytest.mark.parametrize("g", [3, 20])
+def test_keeping_every_pass_weights_by_pass_rate_and_a_cap_of_one_by_one_minus_miss_probability(g):
+    """Section "Expert iteration": over groups of G samples, the expected summed log-likelihood gradient of the kept
+    samples is G grad P when every pass is kept, and (1 - (1 - P)^G) grad log P with at most one kept (the first
+    pass), so a cap restores the log weighting only where G P >> 1. By simulation against the closed forms."""
+    rng = np.random.default_rng(g)
+    theta = np.array([-2.0, -0.5, 0.3, 1.0, -3.0])
+    r = np.array([1, 0, 0, 0, 1.0])                                   # answers 0 and 4 pass
+    pi = _policy(theta)
+    p = pi @ r
+    score = np.eye(5) - pi
+    grad_p = pi * (r - p)
+    groups = rng.choice(5, size=(100_000, g), p=pi)
+    passed = r[groups] > 0
+    every = (score[groups] * passed[..., None]).sum(axis=1)
+    first = np.argmax(passed, axis=1)
+    capped = score[groups[np.arange(len(groups)), first]] * passed.any(axis=1)[:, None]
+    for sampled, closed in ((every, g * grad_p), (capped, (1 - (1 - p) ** g) * grad_p / p)):
+        se = sampled.std(axis=0) / np.sqrt(len(sampled))
+        assert np.all(np.abs(sampled.mean(axis=0) - closed) < 5 * se + 1e-9)
+    if g * p < 1:                                                      # rarely solved: far below the log weighting
+        assert 1 - (1 - p) ** g < 0.7
+
+
 def _explicit(k, g, kind, eps=0.0):
     rew = np.r_[np.ones(k), np.zeros(g - k)]
     if kind == "grpo":
