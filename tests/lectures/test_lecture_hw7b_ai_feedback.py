@@ -116,6 +116,17 @@ def test_a_length_habit_tilts_the_optimum_and_a_random_order_offset_only_flatten
     h = 1e-6
     slope = (0.5 * (expit(h + c) + expit(h - c)) - 0.5 * (expit(-h + c) + expit(-h - c))) / (2 * h)
     assert np.isclose(slope, expit(c) * (1 - expit(c)), rtol=1e-6) and slope < 0.25
+    # and the population DPO optimum on such labels (small score gaps) keeps s's ranking but tilts less: its log
+    # ratio is about 4 sigma(c)(1 - sigma(c)) s / beta instead of s / beta
+    small = rng.normal(scale=0.3, size=k)
+    gaps = small[:, None] - small[None, :]
+    for c in (1.0, 2.0):
+        fit = minimize(population_loss, np.zeros(k), args=(log_ref, mu, 0.5 * (expit(gaps + c) + expit(gaps - c)), beta),
+                       method="BFGS", options={"gtol": 1e-10})
+        tilt = fit.x - np.logaddexp.reduce(fit.x) - log_ref
+        x, y = (small - small.mean()) / beta, tilt - tilt.mean()
+        assert np.array_equal(np.argsort(y), np.argsort(small))
+        assert np.isclose((x @ y) / (x @ x), 4 * expit(c) * (1 - expit(c)), rtol=0.05)
 
 
 @pytest.mark.parametrize("c", [0.4, 1.0, -0.7])
