@@ -156,7 +156,7 @@ def test_records_the_episodes_exactly(student, rng):
       "afterwards) while the others go on executing the same chunk; stop stepping when every episode has ended. "
       "A chunk of exactly `execute` actions is valid.")
 def test_episodes_that_end_inside_a_chunk(student, rng):
-    """Scripted episodes of hidden lengths ending inside chunks of k actions: lengths, flags, zero-padded rewards, no extra steps"""
+    """Scripted episodes of hidden lengths ending inside chunks of k actions: lengths, flags, zero-padded rewards, obs and actions, no extra steps"""
     n, execute = 4, 4
     lengths = rng.choice(np.arange(2, 15), size=n, replace=False)
     lengths[0] = execute * int(rng.integers(1, 3)) + int(rng.integers(1, execute))   # inside a chunk, not at its end
@@ -174,6 +174,11 @@ def test_episodes_that_end_inside_a_chunk(student, rng):
     check_array(ep["mask"].astype(bool), mask, name="the mask")
     rewards = np.stack([a[0] for a in rec.after], axis=1) * mask          # the lengths differ: padding is certain
     check_array(ep["rewards"], rewards.astype(np.float32), rtol=1e-5, atol=1e-6, name="rewards (zero after an episode ends)")
+    sent = (np.stack(rec.actions, axis=1) * mask[..., None]).astype(np.float32)
+    check_array(ep["actions"], sent, rtol=1e-5, atol=1e-6, name="actions (the ones sent, zero after an episode ends)")
+    seen = (np.stack(rec.obs[:T], axis=1) * mask[..., None]).astype(np.float32)
+    check_array(ep["obs"], seen, rtol=1e-5, atol=1e-6, name="obs (the ones each action was chosen from, zero after an "
+                "episode ends)")
     want = _expected(rec, weights, bias, execute)
     check_array(np.stack(rec.actions)[:, 0], want[:, 0], rtol=1e-5, atol=1e-5,
                 name="the actions of the longest-running episodes after another one ended")

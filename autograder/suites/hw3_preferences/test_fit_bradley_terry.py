@@ -113,3 +113,14 @@ def test_mm_reaches_a_stationary_point(student, reference, rng):
     grad = reference.bt_gradient(got, i, j, mu)
     assert np.abs(grad).max() < 1e-7, f"the gradient of the loss at your fit is {np.abs(grad).max():.1e}, not ~0"
     _check_mm_steps(student, 12, i, j, mu)
+    # Item 0's win rate (1/2) is the geometric mean of the others' (5/8, 2/5), so the first iteration leaves its
+    # log-strength at 0 while the others move: only the largest move says whether the iteration has converged.
+    i = np.repeat([0, 1, 0], [10, 10, 15])
+    j = np.repeat([1, 2, 2], [10, 10, 15])
+    mu = np.repeat([1.0, 0.0, 1.0, 0.5, 1.0, 0.5, 0.0], [5, 5, 5, 5, 5, 5, 5])
+    got = student.fit_bradley_terry_mm(3, i, j, mu)
+    assert isinstance(got, np.ndarray) and got.shape == (3,), f"expected 3 utilities, got {np.shape(got)}"
+    grad = reference.bt_gradient(got, i, j, mu)
+    assert np.abs(grad).max() < 1e-7, (f"on a 3-item instance where one item does not move in the first iteration, the "
+                                       f"gradient of the loss at your fit is {np.abs(grad).max():.1e}, not ~0: stop only "
+                                       "once no log-strength moves by more than tol")
