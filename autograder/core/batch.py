@@ -22,7 +22,7 @@ from typing import Callable, Iterable, Iterator
 from autograder.core import course
 from autograder.core.grader import Grader
 from autograder.core.intake import NotebookError, read_code_cells, walk_notebooks
-from autograder.core.notebook import find_stubs
+from autograder.core.notebook import UNTOUCHED_MARK, find_stubs
 from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError
 from autograder.core.store import RESULT_NAME, archive_results, atomic_write, load_result, notebook_digest, save_result
 
@@ -172,7 +172,7 @@ def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected:
             found = find_stubs(read_code_cells(path)[0], expected)[0]
         except (NotebookError, GraderError):
             return (-1, -1, path.stem == assignment, 0.0)
-        done = sum("raise NotImplementedError" not in m.source for m in found.values())
+        done = sum(UNTOUCHED_MARK not in m.source for m in found.values())
         return (done, len(found), path.stem == assignment, os.lstat(path).st_mtime)
 
     chosen = max(notebooks, key=progress)

@@ -27,7 +27,7 @@ PARAMETERS_TAG, SETUP_TAG = "parameters", "setup"
 @dataclass
 class StubMatch:
     source: str
-    how: str  # "grade_id", "name" (no cell had the stub's grade_id) or "below" (a later cell redefined it)
+    how: str  # "grade_id", "name" (no cell had the stub's grade_id) or "below" (a later cell, its own untouched)
     problem: str = ""
     """Why the matched cell cannot be run (see :class:`autograder.core.intake.CodeCell`), or empty."""
 
@@ -74,31 +74,49 @@ def code_cells(nb: SubmittedNotebook | nbformat.NotebookNode) -> list[CodeCell]:
             for c in nb.cells if c.get("cell_type") == "code"]
 
 
+UNTOUCHED_MARK = "raise NotImplementedError"
+"""What a stub cell as released still holds (nbgrader's placeholder) until the student writes the stub."""
+
+
+def _parses(source: str) -> bool:
+    """Whether a cell is plain Python (a cell with a syntax error or an IPython magic is not an answer)."""
+    try:
+        ast.parse(source)
+    except (SyntaxError, ValueError):
+        return False
+    return True
+
+
 def find_stubs(nb: SubmittedNotebook | nbformat.NotebookNode, expected: list[str]) -> tuple[dict[str, StubMatch], list[str]]:
     """Match each expected stub to a code cell: by ``grade_id``, else by the name the cell defines.
 
-    When several cells match, the last one wins, as it would when the notebook runs top to bottom: an answer
-    written in a new cell below an untouched stub is the answer (and a note says so).
+    The stub's own cell (its ``grade_id``) is the answer, with one exception: while it is untouched (it still
+    raises ``NotImplementedError``), the last cell below it that defines the stub again and parses is the answer,
+    as running the notebook top to bottom would use it (a note says so). A finished stub is never replaced by a
+    later cell: a debugging wrapper or an unfinished rewrite below it is not the answer. Without a ``grade_id``
+    cell, the last parsing cell that defines the name is the answer (the last one at all if none parses).
     ``nb`` is what :func:`autograder.core.intake.read_code_cells` returns (grading), or a notebook from
     :func:`read_submission`.
     """
     found: dict[str, StubMatch] = {}
-    below: set[str] = set()  # stubs last defined by a cell below their own
+    own: dict[str, str] = {}  # each stub's own cell (by grade_id), the last one if several
     for cell in code_cells(nb):
         if cell.grade_id in expected:
-            found[cell.grade_id] = StubMatch(cell.source, "grade_id", cell.problem)
-            below.discard(cell.grade_id)
+            found[cell.grade_id] = own[cell.grade_id] = StubMatch(cell.source, "grade_id", cell.problem)
             continue
-        for name in cell.defines:
-            if name in expected:
-                if name in found and found[name].how == "grade_id":
-                    below.add(name)
-                found[name] = StubMatch(cell.source, "name" if name not in below else "below", cell.problem)
+        names = [name for name in cell.defines if name in expected]
+        parses = bool(names) and not cell.problem and _parses(cell.source)  # parsed only when it may be an answer
+        for name in names:
+            if name in own:
+                if parses and UNTOUCHED_MARK in own[name].source:
+                    found[name] = StubMatch(cell.source, "below", cell.problem)
+            elif parses or name not in found:
+                found[name] = StubMatch(cell.source, "name", cell.problem)
     notes = []
     for name in expected:
-        if name in below:
-            notes.append(f"`{name}` was taken from a cell below its own stub cell that defines it again, as running "
-                         "the notebook top to bottom would use that one")
+        if name in found and found[name].how == "below":
+            notes.append(f"`{name}` was taken from a cell below its own stub cell, which was left as released: "
+                         "running the notebook top to bottom would use that one")
         elif name in found and found[name].how == "name":
             notes.append(f"`{name}` was found by the name it defines (its cell's grading metadata was missing or changed)")
     return {name: found[name] for name in expected if name in found}, notes

@@ -120,3 +120,33 @@ def test_an_answer_in_a_new_cell_below_the_untouched_stub_is_the_answer(fx_grade
     assert any("below its own stub cell" in note for note in below["notes"]), below["notes"]
     above = graded(stub_at)
     assert above["stub"].score == 0 and not any("below its own stub cell" in n for n in above["notes"])
+
+
+def test_a_cell_below_a_finished_stub_never_replaces_it(fx_grader, tmp_path):
+    """Red team C: a debugging wrapper, an unfinished rewrite with a syntax error or a magic, or a rewrite that
+    needs later cells, written below a finished stub, cost the stub its points. The finished stub is the answer;
+    below an untouched stub, a cell that does not parse is not one either."""
+    solved = nbformat.read(str(solved_copy(tmp_path)), as_version=4)
+    stub_at = next(i for i, c in enumerate(solved.cells)
+                   if c.get("metadata", {}).get("nbgrader", {}).get("grade_id") == "mean_of")
+    release = nbformat.read(str(RELEASE), as_version=4)
+    answer = solved.cells[stub_at].source
+
+    def score(nb, below: str, name: str) -> float:
+        nb = nbformat.from_dict(nb)
+        nb.cells.insert(stub_at + 1, nbformat.v4.new_code_cell(below))
+        path = tmp_path / f"{name}.ipynb"
+        nbformat.write(nb, str(path))
+        return {s.name: s.score for s in fx_grader.grade(path).stubs}["mean_of"]
+
+    full = score(solved, "x = 1", "plain")
+    assert full > 0
+    wrapper = "_first = mean_of\ndef mean_of(values):\n    print(values)\n    return _first(values)"
+    rewrite = "def mean_of(values):\n    return total / count   # total and count come from a later cell"
+    broken = "def mean_of(values)\n    return sum(values) / len(values)"
+    magic = "%%time\ndef mean_of(values):\n    return 0.0"
+    for name, below in (("wrapper", wrapper), ("rewrite", rewrite), ("broken", broken), ("magic", magic)):
+        assert score(solved, below, name) == full, name
+    assert score(release, broken, "broken_below_untouched") == 0
+    assert score(release, magic, "magic_below_untouched") == 0
+    assert score(release, answer, "answer_below_untouched") == full
