@@ -21,7 +21,7 @@ from typing import Callable, Iterable, Iterator
 
 from autograder.core import course
 from autograder.core.grader import Grader
-from autograder.core.intake import NotebookError, read_code_cells, walk_notebooks
+from autograder.core.intake import NotebookError, read_code_cells, walk_notebooks, walk_tree
 from autograder.core.notebook import UNTOUCHED_MARK, find_stubs
 from autograder.core.results import GRADER_ERROR, UNGRADABLE, GradeResult, GraderError
 from autograder.core.store import RESULT_NAME, archive_results, atomic_write, load_result, notebook_digest, save_result
@@ -94,8 +94,7 @@ def _contents_digest(path: Path, limit: int = 1000) -> str:
         return ""
     items = [(path, top)]
     if stat.S_ISDIR(top.st_mode):
-        for folder, dirs, files in os.walk(path, followlinks=False):
-            dirs.sort()
+        for folder, dirs, files in walk_tree(path, []):
             for name in sorted(dirs + files):
                 try:
                     items.append((Path(folder) / name, os.lstat(Path(folder) / name)))
@@ -165,21 +164,40 @@ def choose_notebook(name: str, notebooks: list[Path], assignment: str, expected:
                      + (f" ({skipped_note})" if skipped_note else ""))
     if len(notebooks) == 1:
         return Entry(name, notebooks[0], note=skipped_note)
+
+    def mtime(path: Path) -> float:
+        try:
+            return os.lstat(path).st_mtime
+        except OSError:
+            return 0.0
+
     def progress(path: Path) -> tuple[int, int, bool, float]:
         """Stubs done (found and no longer raising NotImplementedError), stubs found, named after the assignment,
-        modified last: students who work in a copy (``hw0_setup-Copy1.ipynb``) hand in the released file too."""
+        modified last: students who work in a copy (``hw0_setup-Copy1.ipynb``) hand in the released file too.
+        A notebook over :data:`MAX_WEIGHED_BYTES` is ranked by its name and time only."""
         try:
-            found = find_stubs(read_code_cells(path)[0], expected)[0]
+            found = find_stubs(read_code_cells(path, cap=MAX_WEIGHED_BYTES)[0], expected)[0]
         except (NotebookError, GraderError):
-            return (-1, -1, path.stem == assignment, 0.0)
+            return (-1, -1, path.stem == assignment, mtime(path))
         done = sum(UNTOUCHED_MARK not in m.source for m in found.values())
-        return (done, len(found), path.stem == assignment, os.lstat(path).st_mtime)
+        return (done, len(found), path.stem == assignment, mtime(path))
 
-    chosen = max(notebooks, key=progress)
+    # Every run of a batch chooses again, so a folder of a thousand notebooks must not cost minutes each time:
+    # only the likeliest few are opened (the assignment's name first, then the newest).
+    weighed = sorted(notebooks, key=lambda p: (p.stem == assignment, mtime(p)), reverse=True)[:MAX_WEIGHED]
+    chosen = max(weighed, key=progress)
     others = [p.name for p in notebooks if p != chosen]
     listed = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
-    note = f"{SEVERAL_NOTEBOOKS}; graded {chosen.name}, the one with the most stubs done (not {listed})"
+    how = ("the one with the most stubs done" if len(weighed) == len(notebooks) else
+           f"the one with the most stubs done among the {MAX_WEIGHED} newest (the assignment's name first)")
+    note = f"{SEVERAL_NOTEBOOKS}; graded {chosen.name}, {how} (not {listed})"
     return Entry(name, chosen, note=note + (f"; {skipped_note}" if skipped_note else ""))
+
+
+MAX_WEIGHED = 10
+"""At most this many of a submission's notebooks are opened to choose the one to grade."""
+MAX_WEIGHED_BYTES = 8 * 1024**2
+"""A notebook over this size is not opened to choose among several (it is ranked by name and time)."""
 
 
 def grade_upload(assignment: str, folder: Path, hide: list[Path] = ()) -> GradeResult:
@@ -247,10 +265,16 @@ def stray_files(folder: Path) -> list[str]:
             and c.name != "submission_metadata.yml" and stat.S_ISREG(os.lstat(c).st_mode)]
 
 
-def _other_assignments_only(notebooks: list[Path], assignment: str) -> str:
-    """A problem to report when every notebook submitted is named after another assignment, else ``""``."""
+def _other_assignments_only(notebooks: list[Path], assignment: str, chosen: Path | None, expected: list[str]) -> str:
+    """A problem to report when every notebook submitted is named after another assignment and the one chosen
+    defines none of this assignment's stubs (this assignment's work saved under another name is graded), else ``""``."""
     others = set(course.assignment_ids()) - {assignment}
     if notebooks and all(p.stem in others for p in notebooks):
+        try:
+            if chosen is not None and find_stubs(read_code_cells(chosen)[0], expected)[0]:
+                return ""
+        except (NotebookError, GraderError):
+            pass
         names = ", ".join(sorted({p.name for p in notebooks})[:5])
         return (f"the submission holds only another assignment's notebook ({names}), not {assignment}.ipynb: "
                 "was it handed in to the wrong assignment?")
@@ -294,9 +318,12 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
                 entries.append(Entry(child.name, None, missing=True))
                 continue
             where = inner if inner.is_dir() else child
-            notebooks, skipped = notebooks_in(where)
-            entry = choose_notebook(child.name, notebooks, assignment, expected, skipped)
-            problem = _other_assignments_only(notebooks, assignment)
+            try:
+                notebooks, skipped = notebooks_in(where)
+                entry = choose_notebook(child.name, notebooks, assignment, expected, skipped)
+                problem = _other_assignments_only(notebooks, assignment, entry.notebook, expected)
+            except (OSError, RecursionError, ValueError) as err:  # one odd folder is its student's problem only
+                entry, problem = Entry(child.name, None), f"the submission's folder could not be searched ({type(err).__name__})"
             entry = Entry(child.name, None, note=entry.note, problem=problem) if problem else entry
             if entry.notebook is None:
                 entry.handed_in = where

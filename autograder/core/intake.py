@@ -27,7 +27,7 @@ import subprocess
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 MAX_NOTEBOOK_BYTES = 50 * 1024 * 1024
 """A submitted notebook is at most this big on disk (a notebook with its outputs cleared is far smaller)."""
@@ -127,14 +127,53 @@ def read_capped(path: str | Path, cap: int = MAX_NOTEBOOK_BYTES) -> bytes:
     return data
 
 
+MAX_WALK_DEPTH = 32
+"""Folders below this many levels of a submission are not searched (a deeper tree is no one's work)."""
+MAX_WALK_ENTRIES = 10_000
+"""A submission's files and folders beyond this many are not searched."""
+
+
+def walk_tree(folder: str | Path, skipped: list[str]) -> Iterator[tuple[str, list[str], list[str]]]:
+    """``os.walk(folder)`` top-down, sorted, without following links and without recursion (Python 3.11's
+    ``os.walk`` recurses once per level, so a submission nested a thousand folders deep stopped a batch),
+    within :data:`MAX_WALK_DEPTH` levels and :data:`MAX_WALK_ENTRIES` entries; what it leaves out is
+    appended to ``skipped``. As with ``os.walk``, a caller may prune the folder names it is given."""
+    stack, seen = [(str(folder), 0)], 0
+    while stack:
+        root, depth = stack.pop()
+        try:
+            with os.scandir(root) as listing:
+                entries = sorted(listing, key=lambda e: e.name)
+        except OSError:
+            continue
+        if seen + len(entries) > MAX_WALK_ENTRIES:
+            skipped.append(f"more than {MAX_WALK_ENTRIES:,} files and folders: the rest were not searched")
+            entries, stack = entries[:max(0, MAX_WALK_ENTRIES - seen)], []
+        seen += len(entries)
+        dirs, files = [], []
+        for entry in entries:
+            try:
+                (dirs if entry.is_dir() else files).append(entry.name)
+            except OSError:
+                files.append(entry.name)
+        yield root, dirs, files
+        below = [d for d in dirs if not os.path.islink(os.path.join(root, d))]
+        if below and depth + 1 >= MAX_WALK_DEPTH:
+            skipped.append(f"{Path(root).relative_to(folder).as_posix()}/ holds folders more than {MAX_WALK_DEPTH} "
+                           "levels deep: not searched")
+            continue
+        stack.extend((os.path.join(root, d), depth + 1) for d in reversed(below))
+
+
 def walk_notebooks(folder: str | Path) -> tuple[list[Path], list[str]]:
     """The ``.ipynb`` files (any case) under ``folder``, sorted, found without following links; and what was skipped.
 
     A link (to a notebook or a folder), or a notebook that is not a regular file, is left out and
-    named in the second list, so the submission's feedback can say why it was not graded.
+    named in the second list, so the submission's feedback can say why it was not graded; so are the parts of a
+    tree too deep or too large to search (:func:`walk_tree`).
     """
     found, skipped = [], []
-    for root, dirs, files in os.walk(folder, followlinks=False):
+    for root, dirs, files in walk_tree(folder, skipped):
         kept = []
         for name in sorted(dirs):
             if name == CHECKPOINTS:

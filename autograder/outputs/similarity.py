@@ -78,6 +78,15 @@ def without_docstrings(source: str) -> str:
     return re.sub(r"(?m)^[ \t]+\n", "", kept)
 
 
+def compared_part(source: str) -> str:
+    """The first :data:`MAX_STUB_CHARS` of ``source`` once its comment lines and the comments ending lines without
+    quotes are dropped (a fast regex, before the cap): padding a copied stub with 20,000 characters of comments
+    otherwise pushed its code past the cap, and the copy went unflagged."""
+    source = re.sub(r"(?m)^[ \t]*#.*(?:\n|$)", "", source)
+    source = re.sub(r"(?m)^([^'\"#\n]*?)[ \t]*#.*$", r"\1", source)
+    return source[:MAX_STUB_CHARS]
+
+
 def joined_stubs(sources: dict[str, str], stubs: list[str]) -> str:
     """The stub sources in the assignment's order, docstrings left out, each under a comment naming it
     (comments are not compared); a cell matched for several stubs (one cell defining them all) is shown once."""
@@ -99,7 +108,7 @@ def _read_one(name: str, notebook: Path | None, problem: str, stubs: list[str]) 
     except (NotebookError, GraderError) as err:
         return StubCode(name, "", f"could not read the notebook: {err}")
     found, _ = find_stubs(nb, stubs)
-    return StubCode(name, joined_stubs({s: m.source[:MAX_STUB_CHARS] for s, m in found.items() if not m.problem},
+    return StubCode(name, joined_stubs({s: compared_part(m.source) for s, m in found.items() if not m.problem},
                                        stubs))
 
 

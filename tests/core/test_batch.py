@@ -147,16 +147,20 @@ def test_a_student_who_skipped_the_assignment_is_missing_not_graded_from_another
     (submitted / "ben" / "hw1b_multimodal").mkdir(parents=True)   # handed in hw1b only
     shutil.copy(SAMPLES / "partial.ipynb", submitted / "ben" / "hw1b_multimodal" / "hw1b_multimodal.ipynb")
     (submitted / "cat" / "hw0_setup").mkdir(parents=True)          # hw0's folder holds a misplaced notebook
-    shutil.copy(SAMPLES / "partial.ipynb", submitted / "cat" / "hw0_setup" / "hw1b_multimodal.ipynb")
+    shutil.copy(REPO / "assignments/hw1b_multimodal/hw1b_multimodal.ipynb", submitted / "cat" / "hw0_setup")
+    (submitted / "eve" / "hw0_setup").mkdir(parents=True)          # hw0's work saved under another assignment's name
+    shutil.copy(SAMPLES / "partial.ipynb", submitted / "eve" / "hw0_setup" / "hw1_imitation.ipynb")
     (submitted / "dan").mkdir()                                      # a stray notebook outside any folder
     shutil.copy(SAMPLES / "complete.ipynb", submitted / "dan" / "hw0_setup.ipynb")
     for root in (tmp_path / "course", submitted):
         entries = {e.name: e for e in discover(root, "hw0_setup", EXPECTED)}
-        assert set(entries) == {"ann", "cat"}, "ben and dan handed in no hw0_setup/ folder"
+        assert set(entries) == {"ann", "cat", "eve"}, "ben and dan handed in no hw0_setup/ folder"
         assert entries["ann"].notebook.name == "hw0_setup.ipynb"
         assert entries["cat"].notebook is None and "another assignment's notebook" in entries["cat"].problem
+        assert entries["eve"].notebook.name == "hw1_imitation.ipynb" and not entries["eve"].problem, \
+            "its name is another assignment's, but it defines hw0's stubs: it is graded"
         assert missing_submissions(root, "hw0_setup") == ["ben", "dan"]
-    assert missing_submissions(tmp_path / "course", "hw1b_multimodal") == ["cat", "dan"]
+    assert missing_submissions(tmp_path / "course", "hw1b_multimodal") == ["cat", "dan", "eve"]
     flat = tmp_path / "flat"
     flat.mkdir()
     shutil.copy(SAMPLES / "complete.ipynb", flat / "alice.ipynb")
@@ -321,3 +325,63 @@ def test_a_submission_with_nothing_to_grade_is_graded_once_it_holds_a_notebook(o
         {"dave": ("graded", "8"), "nina": ("graded", "8"), "olga": ("graded", "8")}
     assert "hw1_imitation" not in rows()["dave"]["reason"]
     assert "handed in again" not in batch().stdout, "nothing changed since: nothing graded again"
+
+
+def test_a_submission_nested_a_thousand_folders_deep_is_its_own_problem_only(tmp_path):
+    """Red team C: a folder about 990 levels deep made discover raise RecursionError (Python 3.11's os.walk
+    recurses per level), and the batch graded no one. The walk is iterative and stops at MAX_WALK_DEPTH levels,
+    so a notebook that deep is not found (and the feedback says why), and the classmate beside it is graded."""
+    from autograder.core.batch import _contents_digest
+    from autograder.core.intake import MAX_WALK_DEPTH
+
+    subs = tmp_path / "subs"
+    shutil.copy(SAMPLES / "complete.ipynb", (subs / "ann").mkdir(parents=True) or subs / "ann" / "hw0_setup.ipynb")
+    deep = subs / "zed"
+    deep.mkdir()
+    levels = 1000
+    fd = os.open(deep, os.O_RDONLY)
+    try:                                                   # made relative to each level, so paths stay short
+        for _ in range(levels):
+            os.mkdir("d", dir_fd=fd)
+            inner = os.open("d", os.O_RDONLY, dir_fd=fd)
+            os.close(fd)
+            fd = inner
+        with open(os.open("hw0_setup.ipynb", os.O_WRONLY | os.O_CREAT, 0o600, dir_fd=fd), "wb") as f:
+            f.write((SAMPLES / "complete.ipynb").read_bytes())
+    finally:
+        os.close(fd)
+    try:
+        entries = {e.name: e for e in discover(subs, "hw0_setup", EXPECTED)}
+        assert entries["ann"].notebook is not None
+        assert entries["zed"].notebook is None and f"more than {MAX_WALK_DEPTH} levels deep" in entries["zed"].problem
+        assert _contents_digest(deep) == _contents_digest(deep), "the digest walks it too, without recursion"
+    finally:  # pytest's own clean-up of old temporary folders recurses per level too: take the chain down here
+        fds = [os.open(deep, os.O_RDONLY)]
+        for _ in range(levels):
+            fds.append(os.open("d", os.O_RDONLY, dir_fd=fds[-1]))
+        os.unlink("hw0_setup.ipynb", dir_fd=fds[-1])
+        for parent in reversed(fds[:-1]):
+            os.close(fds.pop())
+            os.rmdir("d", dir_fd=parent)
+        os.close(fds.pop())
+
+
+def test_choosing_among_many_notebooks_opens_only_the_likeliest_few(tmp_path, monkeypatch):
+    """Red team C: 1,000 notebooks in one folder made every batch run open each of them (52 s a rerun, against
+    0.4 s). At most MAX_WEIGHED are opened, the assignment's name first, then the newest."""
+    from autograder.core import batch
+
+    folder = tmp_path / "ann"
+    folder.mkdir()
+    for k in range(30):
+        shutil.copy(SAMPLES / "untouched.ipynb", folder / f"scratch{k:02d}.ipynb")
+        os.utime(folder / f"scratch{k:02d}.ipynb", (1_000_000 + k, 1_000_000 + k))
+    shutil.copy(SAMPLES / "complete.ipynb", folder / "final.ipynb")
+    os.utime(folder / "final.ipynb", (2_000_000, 2_000_000))
+    opened = []
+    real = batch.read_code_cells
+    monkeypatch.setattr(batch, "read_code_cells", lambda path, **kw: opened.append(path) or real(path, **kw))
+    notebooks, skipped = batch.notebooks_in(folder)
+    entry = batch.choose_notebook("ann", notebooks, "hw0_setup", EXPECTED, skipped)
+    assert entry.notebook.name == "final.ipynb" and len(opened) == batch.MAX_WEIGHED
+    assert "among the 10 newest" in entry.note

@@ -262,6 +262,20 @@ def test_a_padded_stub_cell_is_compared_up_to_the_cap(tmp_path):
     assert len(code.code) < len(course.stub_names(ASSIGNMENT)) * (MAX_STUB_CHARS + 100)
 
 
+def test_a_copy_padded_with_comments_past_the_cap_is_still_flagged(class_folder, tmp_path):
+    """Red team C: 20,000 characters of comments at the top of each copied stub cell pushed its code past the
+    cap, and a verbatim copy went unflagged. Comments go before the cap."""
+    folder = tmp_path / "submissions"
+    folder.mkdir()
+    write(folder / "solution.ipynb", filled(solution_bodies()))
+    padding = "# " + "notes " * 3_400 + "\n"                            # about 20,000 characters of comment lines
+    padded = {stub: padding + "\n".join("# " + "x" * 80 for _ in range(10)) + "\n" + source
+              for stub, source in filled(solution_bodies()).items()}
+    write(folder / "padded_copy.ipynb", padded)
+    flagged, _ = similar_pairs(read_stub_code(ASSIGNMENT, folder), release_code(ASSIGNMENT))
+    assert [tuple(sorted((p.a, p.b))) for p in flagged] == [("padded_copy", "solution")]
+
+
 HW0_REWRITE = {"discounted_returns": '''
     r = np.asarray(rewards, dtype=float)
     out = np.zeros_like(r)
