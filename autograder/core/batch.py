@@ -401,10 +401,18 @@ def _done(out_dir: Path, name: str) -> bool:
 
 
 def _digest(path: Path | None) -> str:
-    try:
-        return notebook_digest(path) if path is not None else ""
-    except OSError:
+    """The notebook's digest; for one the grader cannot read, one of its size, time and inode (stable while the
+    file is, so an unreadable notebook is not graded again on every run)."""
+    if path is None:
         return ""
+    try:
+        return notebook_digest(path)
+    except OSError:
+        try:
+            st = os.lstat(path)
+        except OSError:
+            return ""
+        return f"unreadable:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
 
 
 def _handed_in_anew(out_dir: Path, entries: list[Entry]) -> list[Entry]:

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import nbformat
 
-from autograder.core.intake import (MAX_NOTEBOOK_BYTES, CodeCell, NotebookError, SubmittedNotebook, defined_names,
-                               read_cells)
+from autograder.core.intake import (MAX_CELL_BYTES, MAX_NOTEBOOK_BYTES, CodeCell, NotebookError, SubmittedNotebook,
+                                    defined_names, read_cells)
 
 __all__ = ["MAX_NOTEBOOK_BYTES", "NotebookError", "StubMatch", "defined_names", "find_stubs", "imported_modules",
            "imported_names", "manual_cells", "read_notebook", "read_submission", "release_plan", "with_parameters"]
@@ -68,10 +68,21 @@ def read_submission(path: str | Path) -> tuple[nbformat.NotebookNode, list[str]]
 
 
 def code_cells(nb: SubmittedNotebook | nbformat.NotebookNode) -> list[CodeCell]:
+    """The code cells with the names each defines; a cell over :data:`MAX_CELL_BYTES` is read only up to the cap
+    for its names and marked unrunnable, as grading reads it (parsing a 12 MB cell cost the sync 4 GB)."""
     if isinstance(nb, SubmittedNotebook):
         return nb.cells
-    return [CodeCell(c.get("source", ""), _nbgrader(c).get("grade_id"), defined_names(c.get("source", "")))
-            for c in nb.cells if c.get("cell_type") == "code"]
+    out = []
+    for c in nb.cells:
+        if c.get("cell_type") != "code":
+            continue
+        source = c.get("source", "")
+        if len(source) > MAX_CELL_BYTES:
+            out.append(CodeCell(source, _nbgrader(c).get("grade_id"), defined_names(source[:MAX_CELL_BYTES]),
+                                f"the cell holds over {MAX_CELL_BYTES // 1024**2} MB of code: it was not run"))
+        else:
+            out.append(CodeCell(source, _nbgrader(c).get("grade_id"), defined_names(source)))
+    return out
 
 
 UNTOUCHED_MARK = "raise NotImplementedError"

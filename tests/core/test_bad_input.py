@@ -150,3 +150,16 @@ def test_a_cell_below_a_finished_stub_never_replaces_it(fx_grader, tmp_path):
     assert score(release, broken, "broken_below_untouched") == 0
     assert score(release, magic, "magic_below_untouched") == 0
     assert score(release, answer, "answer_below_untouched") == full
+
+
+def test_a_cell_over_the_cell_cap_is_not_parsed_whole_by_the_outputs():
+    """Red team C: nbgrader-sync parsed every code cell of a notebook, a 12 MB one included (19 s, 4.3 GB). Cells
+    over MAX_CELL_BYTES are read for names only up to the cap and marked unrunnable, as grading reads them."""
+    from autograder.core.intake import MAX_CELL_BYTES
+    from autograder.core.notebook import code_cells, find_stubs
+
+    huge = "def mean_of(values):\n    return 0.0\n" + "x = [" + "1, " * (MAX_CELL_BYTES // 2) + "]\n"
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(huge)])
+    (cell,) = code_cells(nb)
+    assert cell.defines == ["mean_of"] and "MB of code" in cell.problem
+    assert find_stubs(nb, ["mean_of"])[0]["mean_of"].problem == cell.problem

@@ -385,3 +385,22 @@ def test_choosing_among_many_notebooks_opens_only_the_likeliest_few(tmp_path, mo
     entry = batch.choose_notebook("ann", notebooks, "hw0_setup", EXPECTED, skipped)
     assert entry.notebook.name == "final.ipynb" and len(opened) == batch.MAX_WEIGHED
     assert "among the 10 newest" in entry.note
+
+
+def test_an_unreadable_notebook_has_a_stable_digest_so_it_is_not_graded_again_every_run(tmp_path, monkeypatch):
+    """Red team C (by reading): as a normal user, a mode-000 notebook had an empty digest, so every run of the batch
+    archived its result and graded it again. Its digest now stands on its size, time and inode (root reads any
+    file, so the unreadable case is made here by the digest function failing)."""
+    from autograder.core import batch
+
+    path = tmp_path / "alice.ipynb"
+    shutil.copy(SAMPLES / "complete.ipynb", path)
+
+    def refuse(p, cap=0):
+        raise PermissionError(13, "Permission denied", str(p))
+
+    monkeypatch.setattr(batch, "notebook_digest", refuse)
+    first = batch._digest(path)
+    assert first.startswith("unreadable:") and batch._digest(path) == first
+    os.utime(path, ns=(1, 1))
+    assert batch._digest(path) != first, "a changed file has another digest"
