@@ -9,7 +9,9 @@ every :data:`INTERVAL` seconds and kills the tree as soon as
 
 - **memory**: the tree holds more than the limit: each process's anonymous and shared-memory resident pages
   (``RssAnon + RssShmem``: what it allocated, shared mappings included, but not the pages of files it read),
-  plus memory files (``memfd_create``) it holds open without mapping them, each counted once; or
+  plus memory files (``memfd_create``) it holds open without mapping them, each counted once, and still does
+  when pages shared between its processes (a fork's) are counted once (``Pss_Anon + Pss_Shmem``, read only
+  then, being dearer); or
 - **CPUs**: on average over :data:`CPU_WINDOW` seconds, more than :data:`MAX_BUSY_TASKS` of its tasks
   (threads included) were running or waiting to run. A worker computes on one thread (the zygote sets
   every math library to one), so a tree that keeps several busy is taking CPU time from the submissions
@@ -93,6 +95,29 @@ def private_bytes(pid: int) -> int:
     return total
 
 
+def proportional_bytes(pid: int) -> int | None:
+    """``pid``'s share of its anonymous and shared-memory pages (``Pss_Anon + Pss_Shmem`` in ``smaps_rollup``): a
+    page shared by k processes counts 1/k in each, so a tree's sum counts it once. About a thousand times dearer
+    to read than ``status`` (the kernel walks the page tables), so it only confirms a tree that
+    :func:`private_bytes` puts over the limit. ``None`` where the kernel does not give it."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup", "rb") as f:
+            rollup = f.read()
+    except FileNotFoundError:
+        return None
+    except OSError:
+        return 0
+    total, found = 0, False
+    for line in rollup.splitlines():
+        if line.startswith((b"Pss_Anon:", b"Pss_Shmem:")):
+            try:
+                total += int(line.split()[1]) * 1024
+                found = True
+            except (IndexError, ValueError):
+                pass
+    return total if found else None
+
+
 def memory_file_bytes(pids: list[int]) -> int:
     """Bytes of the memory files (``memfd_create``) the processes ``pids`` hold open, each file once: such a file
     holds memory whether or not anything maps it."""
@@ -161,12 +186,20 @@ class TreeGuard:
             self._busy.append(busy_tasks(pids))
             if len(self._busy) == self._busy.maxlen:
                 self.peak_busy = max(self.peak_busy, sum(self._busy) / len(self._busy))
-            if held > self.limit:
+            if held > self.limit and self._confirmed(pids):
                 self._stop_tree(pids, "memory")
                 return
             if self.peak_busy > self.max_busy:
                 self._stop_tree(pids, "cpus")
                 return
+
+    def _confirmed(self, pids: list[int]) -> bool:
+        """Whether the tree still holds more than the limit counting each shared page once (:func:`proportional_bytes`):
+        the children a process forks share its pages until they write them, and ``RssAnon`` counts them in each."""
+        shares = [proportional_bytes(pid) for pid in pids]
+        if any(share is None for share in shares):
+            return True  # no proportional count on this kernel: the resident count stands
+        return sum(shares) + memory_file_bytes(pids) > self.limit
 
     def _stop_tree(self, pids: list[int], why: str) -> None:
         self.exceeded = why

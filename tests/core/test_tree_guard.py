@@ -125,6 +125,28 @@ def test_memory_files_and_shared_mappings_are_counted():
         assert tree_guard.tree_bytes(proc.pid) >= 176 * 2**20
 
 
+def test_pages_a_fork_shares_with_its_parent_are_counted_once_before_stopping_a_tree():
+    """Red team C: 60 forked children that only slept were stopped, since each one's RssAnon counts the pages it
+    shares with its parent. A tree over the limit by that count is stopped only if it still is when each shared
+    page counts once (Pss): here 9 processes sharing 160 MB against a 600 MB cap go on; writing the pages in
+    each child (private copies, 1.4 GB) is stopped."""
+    def guard_on(children_write: bool) -> str | None:
+        code = ("import os, time\nheld = bytearray(160 * 2**20)\nheld[::4096] = b'\\1' * len(held[::4096])\n"
+                "for _ in range(8):\n    if os.fork() == 0:\n"
+                + ("        held[::4096] = b'\\2' * len(held[::4096])\n" if children_write else "")
+                + "        time.sleep(30)\nprint('ready', flush=True)\ntime.sleep(30)\n")
+        with _ready_process(code) as proc:
+            time.sleep(0.5)
+            assert tree_guard.tree_bytes(proc.pid) > 600 * 2**20, "the resident count puts the tree over the cap"
+            guard = tree_guard.TreeGuard(proc.pid, 600 * 2**20, kill=lambda: None, max_busy=64)
+            time.sleep(1.0)
+            guard.stop()
+            return guard.exceeded
+
+    assert guard_on(children_write=False) is None
+    assert guard_on(children_write=True) == "memory"
+
+
 def test_busy_tasks_counts_processes_and_threads_that_want_a_cpu():
     code = ("import os, threading, time\n"
             "for _ in range(2):\n    if os.fork() == 0:\n        while True: pass\n"
