@@ -33,23 +33,31 @@ def _expected_return(reference, m, policy):
     return float(reference.state_visitation_frequency(m.P, policy, m.p0, m.horizon) @ m.true_reward)
 
 
-def _documented_norms(reference, m, demos, lr, n_steps, ddof):
-    """The gradient norms of the docstring's adaptive steps from w = 0 (computed here with the reference's passes),
-    with the per-feature variance taken with ``ddof``."""
+def _documented_path(reference, m, demos, lr, n_steps, ddof, tol=0.0):
+    """The docstring's adaptive steps from w = 0 (computed here with the reference's passes), with the per-feature
+    variance taken with ``ddof``: the gradient norms at each iteration's start and the weights returned, after
+    ``n_steps`` iterations or once |g| <= tol |mu_D|."""
     summed = m.features[demos.states].sum(axis=1)                     # (N, F) per-trajectory feature sums
     mu_d, scale = summed.mean(axis=0), 1.0 / (summed.var(axis=0, ddof=ddof) + 1.0)
     w, step = np.zeros(m.features.shape[1]), lr
     g = mu_d - _model_features(reference, m, w)[0]
-    norms = [np.linalg.norm(g)]
+    norms = []
     for _ in range(n_steps):
+        norms.append(np.linalg.norm(g))
+        if norms[-1] <= tol * np.linalg.norm(mu_d):
+            break
         u = scale * g
         g_new = mu_d - _model_features(reference, m, w + step * u)[0]
         if g_new @ u > 0:
             w, g, step = w + step * u, g_new, 1.1 * step
         else:
             step /= 2
-        norms.append(np.linalg.norm(g))
-    return np.array(norms)
+    return np.array(norms), w
+
+
+def _documented_norms(reference, m, demos, lr, n_steps, ddof):
+    """The gradient norms of the first ``n_steps + 1`` iterations of :func:`_documented_path`."""
+    return _documented_path(reference, m, demos, lr, n_steps + 1, ddof)[0]
 
 
 @stub("maxent_irl", points=3, hint=HINT)
@@ -107,7 +115,8 @@ def test_history_starts_at_zero_weights(student, reference):
                                    "of the summed features; the first step is lr, then x1.1 after an accepted step and "
                                    "x0.5 after a rejected one (w unchanged).")
 def test_history_follows_the_documented_steps(student, reference):
-    """The first three gradient norms are those of the documented adaptive steps from w = 0"""
+    """The first three gradient norms, and the weights returned after a rejected step and at the stopping rule,
+    are those of the documented adaptive steps from w = 0"""
     m, _, demos = _problem(reference, 6, 80)
     args = (m.P, m.features, m.p0, demos.states, m.horizon, demos.actions)
     _, hist = student.maxent_irl(*args, lr=0.5, n_iters=3, tol=0.0)
@@ -122,6 +131,15 @@ def test_history_follows_the_documented_steps(student, reference):
             assert False, (f"history['grad_norm'][{k}] is not where the documented step rule leads "
                            f"({'too large' if got[k] > want['grad_norm'][k] else 'too small'}): check the scale "
                            "1 / (v + 1), the first step lr, and the x1.1 / x0.5 updates")
+    # The weights returned, recomputed here (not the history the stub reports): with lr = 5 the first step is
+    # rejected and the next ones accepted; with tol = 0.1 the iteration stops at |g| <= tol |mu_D| (9 iterations).
+    for lr, n_iters, tol, what in ((5.0, 3, 0.0, "after a rejected first step (the step halves, w unchanged) and "
+                                    "two accepted ones"), (0.5, 200, 0.1, "when it stops at |g| <= tol * |mu_D|")):
+        w, _ = student.maxent_irl(*args, lr=lr, n_iters=n_iters, tol=tol)
+        wants = [_documented_path(reference, m, demos, lr, n_iters, ddof, tol)[1] for ddof in (0, 1)]
+        assert isinstance(w, np.ndarray) and w.shape == wants[0].shape, f"w should be a ({wants[0].shape[0]},) array"
+        if not any(np.allclose(w, want, rtol=1e-5, atol=1e-8) for want in wants):
+            assert False, f"the weights returned {what} are not the documented rule's: {np.round(w, 4)}"
 
 
 @stub("maxent_irl", points=1, hint=HINT)
