@@ -281,6 +281,29 @@ def _other_assignments_only(notebooks: list[Path], assignment: str, chosen: Path
     return ""
 
 
+def _merge_same_names(entries: list[Entry], assignment: str, expected: list[str]) -> list[Entry]:
+    """One entry per name: ``alice.ipynb`` beside a folder ``alice/`` (or ``alice.IPYNB``) is one student who handed
+    in twice, graded from the notebook :func:`choose_notebook` picks among them, with a note; two entries of one
+    name would share a result folder, the last written winning and every later run grading both again."""
+    by_name: dict[str, list[Entry]] = {}
+    for entry in entries:
+        by_name.setdefault(entry.name, []).append(entry)
+    merged = []
+    for name, same in by_name.items():
+        if len(same) == 1:
+            merged.append(same[0])
+            continue
+        notebooks = [e.notebook for e in same if e.notebook is not None]
+        if not notebooks:
+            merged.append(same[0])
+            continue
+        entry = choose_notebook(name, notebooks, assignment, expected)
+        twice = f"handed in {len(same)} times under this name (a notebook and a folder, say)"
+        entry.note = f"{entry.note}; {twice}" if entry.note else f"{twice}; graded {entry.notebook.name}"
+        merged.append(entry)
+    return merged
+
+
 def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
     """One entry per submission in ``folder`` (see the module docstring for the layouts).
 
@@ -328,6 +351,7 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
             if entry.notebook is None:
                 entry.handed_in = where
             entries.append(entry)
+    entries = _merge_same_names(entries, assignment, expected)
     # Names are made unique over every student folder, handed in or not, so they never shift when one hands in.
     for entry, name in zip(entries, unique_safe_names([e.name for e in entries])):
         entry.name = name

@@ -172,11 +172,19 @@ def walk_notebooks(folder: str | Path) -> tuple[list[Path], list[str]]:
     named in the second list, so the submission's feedback can say why it was not graded; so are the parts of a
     tree too deep or too large to search (:func:`walk_tree`).
     """
-    found, skipped = [], []
+    found, skipped, checkpoints = [], [], []
     for root, dirs, files in walk_tree(folder, skipped):
         kept = []
         for name in sorted(dirs):
             if name == CHECKPOINTS:
+                try:
+                    saved = sum(f.lower().endswith(".ipynb") for f in os.listdir(os.path.join(root, name)))
+                except OSError:
+                    saved = 0
+                if saved:
+                    where = Path(root, name).relative_to(folder).as_posix()
+                    checkpoints.append(f"{where}/ holds {saved} notebook(s), Jupyter's automatic checkpoints: "
+                                       "not graded")
                 continue
             if os.path.islink(os.path.join(root, name)):
                 skipped.append(f"{Path(root, name).relative_to(folder).as_posix()} is a symbolic link: not followed")
@@ -194,6 +202,8 @@ def walk_notebooks(folder: str | Path) -> tuple[list[Path], list[str]]:
             else:
                 what = "a symbolic link: not followed" if stat.S_ISLNK(mode) else "not a regular file: not read"
                 skipped.append(f"{path.relative_to(folder).as_posix()} is {what}")
+    if not found:  # said only where they explain why nothing was graded
+        skipped += checkpoints
     return sorted(found), skipped
 
 

@@ -103,6 +103,9 @@ class SyncReport:
     earlier_ids: list[tuple[str, str]] = field(default_factory=list)
     """``(id recorded by an earlier sync, student id now)``: the safe name an earlier version of this sync recorded
     a student under, still holding a submission (export lists it as a student of its own)."""
+    claimed: list[tuple[str, str, list[str]]] = field(default_factory=list)
+    """``(student id, submission recorded, other submissions naming that id)``: one gradebook row per student, so a
+    student named by several submissions (a Gradescope export where two list the same SID) gets the newest only."""
     suite_now: str = ""
     regrade_command: str = ""
 
@@ -127,6 +130,10 @@ class SyncReport:
                        f"({', '.join(sorted(set(self.other_suite.values())))}; the current one is {self.suite_now}): "
                        f"{listed([plain(n) for n in names])}. Their scores are the old suite's; regrade them all, "
                        f"which records the new ones: {self.regrade_command}")
+        for student, kept, others in self.claimed:
+            out.append(f"warning: student {plain(student)} is named by {len(others) + 1} submissions: recorded "
+                       f"{plain(kept)} (the newest where the times are known, else the last by name), not "
+                       f"{listed([plain(o) for o in others])}. Check the export's submitters, then sync again.")
         if self.reread:
             cells = listed([f"{plain(s)}: {plain(c)}" for s, c in self.reread], 30)
             out.append(f"warning: {len(self.reread)} score(s) given by hand are of a cell whose text changed since "
@@ -622,6 +629,31 @@ def _submitters(entries: list[Entry], folder: Path, report: SyncReport
     return out
 
 
+def _one_submission_per_student(people: dict[str, tuple[list[Submitter], str | None]], graded: set[str],
+                                report: SyncReport) -> dict[str, str]:
+    """For each student id that several graded submissions name, the submission recorded for it: the newest by
+    its time where every one has a time, else the last by name; each such id is named in ``report.claimed``."""
+    from nbgrader.utils import parse_utc
+
+    by_student: dict[str, list[str]] = {}
+    for name in sorted(people):
+        if name in graded:
+            for person in people[name][0]:
+                by_student.setdefault(person.student_id, []).append(name)
+    owner = {}
+    for student, names in by_student.items():
+        if len(names) < 2:
+            continue
+        try:
+            times = [parse_utc(people[n][1]) if people[n][1] else None for n in names]
+        except (ValueError, TypeError, OverflowError):
+            times = [None]
+        kept = max(zip(times, names))[1] if None not in times else names[-1]
+        owner[student] = kept
+        report.claimed.append((student, kept, [n for n in names if n != kept]))
+    return owner
+
+
 def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | None = None) -> SyncReport:
     """Record the batch in ``results_dir`` (graded from ``folder``) in the gradebook of the nbgrader course at
     ``course_root`` (default: this repository), and place each notebook for formgrader. See the module."""
@@ -636,6 +668,7 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
     report = SyncReport(suite_now=course.suite_version(assignment),
                         regrade_command=f"python -m autograder regrade {assignment} {folder} --out {results_dir}")
     people = _submitters(list(entries.values()), folder, report)
+    owner = _one_submission_per_student(people, {n for n, r in results.items() if r.status != GRADER_ERROR}, report)
     students: dict[str, list[str]] = {}
     failed: dict[str, str] = {}
     from nbgrader.api import MissingEntry
@@ -667,6 +700,8 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
             if result.suite_version and result.suite_version != report.suite_now:
                 report.other_suite[name] = result.suite_version
             for person in submitters:
+                if owner.get(person.student_id, name) != name:
+                    continue  # a newer submission names this student too: it is theirs
                 keep_names(gb, person)
                 place = Path(coursedir.format_path(coursedir.autograded_directory, person.student_id,
                                                    assignment)) / f"{assignment}.ipynb"

@@ -404,3 +404,27 @@ def test_an_unreadable_notebook_has_a_stable_digest_so_it_is_not_graded_again_ev
     assert first.startswith("unreadable:") and batch._digest(path) == first
     os.utime(path, ns=(1, 1))
     assert batch._digest(path) != first, "a changed file has another digest"
+
+
+def test_a_notebook_and_a_folder_of_one_name_are_one_submission(tmp_path):
+    """Red team D: alice.ipynb beside a folder alice/ were graded into one result folder, the last written winning,
+    and every later run graded both again. They are one submission, graded from the notebook with most stubs done."""
+    flat = tmp_path / "flat"
+    (flat / "alice").mkdir(parents=True)
+    shutil.copy(SAMPLES / "untouched.ipynb", flat / "alice.ipynb")
+    shutil.copy(SAMPLES / "complete.ipynb", flat / "alice" / "hw0_setup.ipynb")
+    shutil.copy(SAMPLES / "partial.ipynb", flat / "bob.ipynb")
+    entries = discover(flat, "hw0_setup", EXPECTED)
+    assert [e.name for e in entries] == ["alice", "bob"]
+    assert entries[0].notebook == flat / "alice" / "hw0_setup.ipynb" and "2 times under this name" in entries[0].note
+
+
+def test_a_notebook_only_in_checkpoints_is_named_in_the_reason(tmp_path):
+    """Red team D: an upload whose only notebook was in .ipynb_checkpoints/ got "no notebook" and nothing more."""
+    from autograder.core.batch import choose_notebook, notebooks_in
+
+    (tmp_path / "up" / ".ipynb_checkpoints").mkdir(parents=True)
+    shutil.copy(SAMPLES / "complete.ipynb", tmp_path / "up" / ".ipynb_checkpoints" / "hw0_setup-checkpoint.ipynb")
+    notebooks, skipped = notebooks_in(tmp_path / "up")
+    entry = choose_notebook("up", notebooks, "hw0_setup", EXPECTED, skipped)
+    assert entry.notebook is None and ".ipynb_checkpoints/ holds 1 notebook(s)" in entry.problem

@@ -223,3 +223,30 @@ def test_gradebook_csv_gives_a_submission_found_ungradable_before_any_test_the_a
     assert (rows["eve"]["score"], rows["eve"]["percent"], rows["eve"]["status"]) == ("0", "0.0", UNGRADABLE)
     write_gradebook([nothing], tmp_path / "alone.csv")  # no graded result to take the maximum from: left empty
     assert next(csv.DictReader((tmp_path / "alone.csv").open()))["max_score"] == ""
+
+
+def test_a_student_named_by_two_submissions_gets_the_newest_and_a_warning(fixture_course, tmp_path, new_course):
+    """Red team D: two Gradescope submissions listing the same SID were both recorded for that student, the one
+    whose folder sorts last silently overwriting the other (here the older, untouched one over the full one)."""
+    folder, out, root = tmp_path / "export", tmp_path / "results", new_course
+    submission(folder / "submission_1" / "fx.ipynb", "Because.")
+    submission(folder / "submission_2" / "fx.ipynb")
+    (folder / "submission_metadata.yml").write_text("""\
+submission_1:
+  :submitters:
+  - :name: Ada Lovelace
+    :sid: '1001'
+  :created_at: 2026-03-02 09:00:00.000000000 +00:00
+submission_2:
+  :submitters:
+  - :name: Ada Lovelace
+    :sid: '1001'
+  :created_at: 2026-03-01 09:00:00.000000000 -07:00
+""")
+    write_outputs(graded("submission_1", set(POINTS)), out / "submission_1")
+    write_outputs(graded("submission_2", set()), out / "submission_2")
+    report = gradebook.sync("fx", folder, out, root)
+    assert report.recorded == [("submission_1", "1001")]
+    assert grades_of(root, "1001")["scaled_sum"] == (3, None, False), "the newer submission, graded 7/7"
+    (warning,) = [w for w in report.warnings() if "named by 2 submissions" in w]
+    assert "submission_1" in warning and "submission_2" in warning
