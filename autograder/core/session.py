@@ -22,7 +22,7 @@ from autograder.sandbox.config import Limits, SpawnConfig
 from autograder.sandbox.wire import (ChannelClosed, ChannelTimeout, HandleRef, LentRef, ProtocolError, decode,
                                      encode)
 from autograder.sandbox.worker import NotDefined, Worker
-from autograder.core.supervisor import SandboxStartError, WorkerProcess, Zygote
+from autograder.core.supervisor import OUTPUT_READ_BYTES, SandboxStartError, WorkerProcess, Zygote
 
 START_SECONDS = 30.0
 """A worker that has not reported ready by then is broken (the grader's fault: no student code ran yet)."""
@@ -536,6 +536,9 @@ class Session(Transport):
             return _decode_reply(self, reply, reply_blobs)
         except ChannelTimeout:
             self.worker.kill()
+            if self.worker.flooded:
+                why = (f"printed more than {OUTPUT_READ_BYTES // 2**20} MB, which the grader stopped reading, so its "
+                       "next print waited until its time ran out")
             raise SandboxTimeout(why) from None
         except TrustedWorkTimeout:  # interrupted mid-exchange: the channel is out of step, the worker must go
             self.worker.kill()

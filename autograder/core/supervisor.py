@@ -31,6 +31,10 @@ OUTPUT_KEEP = 4096
 """Bytes of a worker's stdout/stderr kept (the newest): enough context for a crash message."""
 TAIL_CHARS = 1500
 """Characters of that output a crash message may quote."""
+OUTPUT_READ_BYTES = 64 * 2**20
+"""Bytes of a worker's output the grader reads at most. Reading costs the grader's process about as much CPU as
+writing costs the worker, outside the worker's limits; past this the grader stops reading, the worker's next
+write blocks, and its time limit ends it."""
 PRELOAD_SECONDS = 600.0
 """How long the zygote may take to import the course's modules (torch, mujoco...) before its first worker.
 Apart from a worker's own start deadline: on a loaded machine with a cold disk the imports alone can
@@ -125,6 +129,8 @@ class WorkerProcess:
         self.final_schedstat: tuple[int, int] | None = None
         """The worker's (CPU ns, run-delay ns) as it was killed, for accounts that outlive it."""
         self.output = bytearray()
+        self.flooded = False
+        """Whether the worker wrote more than :data:`OUTPUT_READ_BYTES` and the grader stopped reading it."""
         self.pid = self.pgid = None
         self.isolation = "unknown"
         self.alive = True
@@ -132,6 +138,7 @@ class WorkerProcess:
         self._drain.start()
 
     def _read_output(self) -> None:
+        read = 0
         while True:
             try:
                 chunk = os.read(self.out_fd, 65536)
@@ -141,6 +148,10 @@ class WorkerProcess:
                 return
             self.output += chunk
             del self.output[:-OUTPUT_KEEP]
+            read += len(chunk)
+            if read > OUTPUT_READ_BYTES:
+                self.flooded = True
+                return
 
     def start(self, timeout: float) -> dict[str, Any]:
         """Read the launcher's pid report and the worker's ready message."""

@@ -61,8 +61,8 @@ def _grade_fx(tmp_path, monkeypatch, code: str, **limits):
     from autograder.core.grader import Grader
 
     monkeypatch.setattr(course, "REPO", FIXTURE_COURSE)
-    grader = Grader("fx", limits=Limits(call_seconds=30, test_seconds=60, exec_seconds=10, submission_seconds=120,
-                                        **limits))
+    grader = Grader("fx", limits=Limits(**{"call_seconds": 30, "test_seconds": 60, "exec_seconds": 10,
+                                           "submission_seconds": 120, **limits}))
     try:
         nb = with_cells(FIXTURE_COURSE / "solutions/fx/fx.ipynb", tmp_path / "probe.ipynb", {"scaled_sum": code})
         start = time.monotonic()
@@ -197,3 +197,24 @@ def test_no_system_v_shared_memory_in_a_namespace(tmp_path, monkeypatch):
         pytest.skip("no namespaces here (isolation 'none'): the worker shares the machine's IPC")
     messages = [t.message for t in stubs["scaled_sum"].tests]
     assert stubs["scaled_sum"].score == 0 and any("no segment" in m for m in messages), messages
+
+
+FLOOD = '''
+import sys
+def scaled_sum(x):
+    line = "x" * 65535 + "\\n"
+    for _ in range(2000):                  # 128 MB of output, then the right answer
+        sys.stdout.write(line)
+    return SCALE * np.asarray(x, dtype=float).sum(axis=-1)
+'''
+
+
+def test_a_worker_that_floods_its_output_stops_being_read_and_times_out(tmp_path, monkeypatch):
+    """Red team C: reading a worker's output costs the grader's process about the CPU writing costs the worker, out
+    of the worker's limits (3.2 s of the grader's CPU in 6.1 s). Past 64 MB the grader stops reading: the worker's
+    next write blocks, its time runs out, and the message says why."""
+    from autograder.core import supervisor
+
+    monkeypatch.setattr(supervisor, "OUTPUT_READ_BYTES", 8 * 2**20)  # the same rule, reached sooner
+    stubs, _, _ = _grade_fx(tmp_path, monkeypatch, FLOOD, call_seconds=3, test_seconds=4)
+    _stopped_for(stubs, "which the grader stopped reading")
