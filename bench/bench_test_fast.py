@@ -92,7 +92,10 @@ def make_test_in_a_clone(durations: int) -> dict:
     folder = Path(tempfile.mkdtemp(prefix="rlcourse-make-test-"))
     try:
         subprocess.run(["git", "clone", "--quiet", str(REPO), str(folder / "clone")], check=True)
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=folder / "clone", capture_output=True,
+                                text=True, check=True).stdout.strip()
         record = run(durations, "test", folder / "clone")
+        record["cloned_commit"] = commit  # the meta names it too: HEAD may move while the clone is tested
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     record["pytest_seconds"] = round(sum(r["seconds"] for r in record["pytest_runs"]), 1)
@@ -108,7 +111,9 @@ def main() -> None:
                         help=f"time make test in a fresh clone of HEAD instead ({MAKE_TEST_RESULTS.relative_to(REPO)})")
     args = parser.parse_args()
     if args.make_test:
-        record = {**make_test_in_a_clone(args.durations), "meta": meta()}
+        record = make_test_in_a_clone(args.durations)
+        os.environ["BENCH_COMMIT"] = record["cloned_commit"]
+        record["meta"] = meta()
         print(f"make test in a fresh clone: {record['wall_seconds']} s wall ({record['pytest_seconds']} s in pytest, "
               f"{record['setup_and_other_seconds']} s set-up and the rest), {record['cpu_seconds']} s CPU "
               f"(the machine busy {record['machine_busy_seconds']} s, idle {record['machine_idle_seconds']} s); "
