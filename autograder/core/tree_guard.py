@@ -99,14 +99,12 @@ def proportional_bytes(pid: int) -> int | None:
     """``pid``'s share of its anonymous and shared-memory pages (``Pss_Anon + Pss_Shmem`` in ``smaps_rollup``): a
     page shared by k processes counts 1/k in each, so a tree's sum counts it once. About a thousand times dearer
     to read than ``status`` (the kernel walks the page tables), so it only confirms a tree that
-    :func:`private_bytes` puts over the limit. ``None`` where the kernel does not give it."""
+    :func:`private_bytes` puts over the limit. ``None`` where the kernel does not give it or the process hides it."""
     try:
         with open(f"/proc/{pid}/smaps_rollup", "rb") as f:
             rollup = f.read()
-    except FileNotFoundError:
+    except OSError:  # gone, or hidden (a process that made itself undumpable): its resident count stands
         return None
-    except OSError:
-        return 0
     total, found = 0, False
     for line in rollup.splitlines():
         if line.startswith((b"Pss_Anon:", b"Pss_Shmem:")):
@@ -196,10 +194,11 @@ class TreeGuard:
     def _confirmed(self, pids: list[int]) -> bool:
         """Whether the tree still holds more than the limit counting each shared page once (:func:`proportional_bytes`):
         the children a process forks share its pages until they write them, and ``RssAnon`` counts them in each."""
-        shares = [proportional_bytes(pid) for pid in pids]
-        if any(share is None for share in shares):
-            return True  # no proportional count on this kernel: the resident count stands
-        return sum(shares) + memory_file_bytes(pids) > self.limit
+        held = 0
+        for pid in pids:  # a process whose share cannot be read (hidden, or an older kernel) counts as resident
+            share = proportional_bytes(pid)
+            held += private_bytes(pid) if share is None else share
+        return held + memory_file_bytes(pids) > self.limit
 
     def _stop_tree(self, pids: list[int], why: str) -> None:
         self.exceeded = why

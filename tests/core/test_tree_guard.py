@@ -147,6 +147,28 @@ def test_pages_a_fork_shares_with_its_parent_are_counted_once_before_stopping_a_
     assert guard_on(children_write=True) == "memory"
 
 
+def test_a_process_that_hides_its_share_counts_as_resident(monkeypatch):
+    """A process may hide its smaps_rollup from a grader of its own user (it makes itself undumpable): its resident
+    count stands for it, so hiding never lets a tree keep more than the cap."""
+    code = "import time\nheld = bytearray(200 * 2**20)\nprint('ready', flush=True)\ntime.sleep(30)\n"
+    with _ready_process(code) as proc:
+        guard = tree_guard.TreeGuard(proc.pid, 100 * 2**20, kill=lambda: None, max_busy=64, interval=3600)
+        try:
+            assert guard._confirmed([proc.pid])
+            real_open = open
+
+            def refuse_rollup(path, *args, **kwargs):  # what a grader of the worker's own user meets (EACCES)
+                if str(path).endswith("/smaps_rollup"):
+                    raise PermissionError(13, "Permission denied", str(path))
+                return real_open(path, *args, **kwargs)
+
+            monkeypatch.setattr(tree_guard, "open", refuse_rollup, raising=False)
+            assert tree_guard.proportional_bytes(proc.pid) is None
+            assert guard._confirmed([proc.pid]), "hidden: counted by its resident pages, still over the cap"
+        finally:
+            guard.stop()
+
+
 def test_busy_tasks_counts_processes_and_threads_that_want_a_cpu():
     code = ("import os, threading, time\n"
             "for _ in range(2):\n    if os.fork() == 0:\n        while True: pass\n"
