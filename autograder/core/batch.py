@@ -346,7 +346,8 @@ def discover(folder: Path, assignment: str, expected: list[str]) -> list[Entry]:
                 entry = choose_notebook(child.name, notebooks, assignment, expected, skipped)
                 problem = _other_assignments_only(notebooks, assignment, entry.notebook, expected)
             except (OSError, RecursionError, ValueError) as err:  # one odd folder is its student's problem only
-                entry, problem = Entry(child.name, None), f"the submission's folder could not be searched ({type(err).__name__})"
+                entry = Entry(child.name, None)
+                problem = f"the submission's folder could not be searched ({type(err).__name__})"
             entry = Entry(child.name, None, note=entry.note, problem=problem) if problem else entry
             if entry.notebook is None:
                 entry.handed_in = where
