@@ -27,7 +27,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from bench.run_record import meta  # noqa: E402
+from bench.run_record import head_commit, meta  # noqa: E402
 RESULTS = REPO / "bench" / "results" / "test_fast.json"
 MAKE_TEST_RESULTS = REPO / "bench" / "results" / "make_test.json"
 LAST_RUN = REPO / "build" / "bench" / "make_test_last.json"
@@ -92,8 +92,7 @@ def make_test_in_a_clone(durations: int) -> dict:
     folder = Path(tempfile.mkdtemp(prefix="rlcourse-make-test-"))
     try:
         subprocess.run(["git", "clone", "--quiet", str(REPO), str(folder / "clone")], check=True)
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=folder / "clone", capture_output=True,
-                                text=True, check=True).stdout.strip()
+        commit = head_commit(folder / "clone")
         record = run(durations, "test", folder / "clone")
         record["cloned_commit"] = commit  # the meta names it too: HEAD may move while the clone is tested
     finally:

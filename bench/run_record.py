@@ -19,9 +19,14 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _git(*args: str) -> str:
-    done = subprocess.run(["git", *args], capture_output=True, text=True, cwd=REPO)
+def _git(*args: str, cwd: Path = REPO) -> str:
+    done = subprocess.run(["git", *args], capture_output=True, text=True, cwd=cwd)
     return done.stdout.strip() if done.returncode == 0 else ""
+
+
+def head_commit(repo: Path = REPO) -> str:
+    """The short commit checked out in ``repo`` (a clone being measured, say), or ``"unknown"``."""
+    return _git("rev-parse", "--short", "HEAD", cwd=repo) or "unknown"
 
 
 def meta(paths: Sequence[str] = ()) -> dict:
@@ -31,7 +36,7 @@ def meta(paths: Sequence[str] = ()) -> dict:
     if os.environ.get("BENCH_COMMIT"):
         commit, changed = os.environ["BENCH_COMMIT"], []
     else:
-        commit = _git("rev-parse", "--short", "HEAD") or "unknown"
+        commit = head_commit()
         changed = _git("status", "--porcelain", "--untracked-files=no", "--", *paths).splitlines()
     now = datetime.datetime.now(datetime.timezone.utc)
     return {"commit": commit, "uncommitted_files": len(changed), "date": now.date().isoformat(),
