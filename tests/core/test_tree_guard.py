@@ -77,7 +77,7 @@ def _grade_fx(tmp_path, monkeypatch, code: str, **limits):
     return {s.name: s for s in result.stubs}, seconds, result.isolation
 
 
-def _stopped_for(stubs, words: str) -> None:
+def _assert_stopped_for(stubs, words: str) -> None:
     assert stubs["scaled_sum"].score == 0
     assert any(words in t.message for t in stubs["scaled_sum"].tests), [t.message for t in stubs["scaled_sum"].tests]
     assert stubs["mean_of"].score == stubs["mean_of"].max_score, "the next stub is graded in a fresh worker"
@@ -86,7 +86,7 @@ def _stopped_for(stubs, words: str) -> None:
 @pytest.mark.slow
 def test_forked_children_together_cannot_pass_the_limit(tmp_path, monkeypatch):
     stubs, seconds, _ = _grade_fx(tmp_path, monkeypatch, FORK_AND_HOLD, memory_bytes=int(1.5 * 2**30))
-    _stopped_for(stubs, "GB of memory, counting every process")
+    _assert_stopped_for(stubs, "GB of memory, counting every process")
     assert seconds < 60, "the tree is stopped when it passes the limit, not when its call times out"
 
 
@@ -114,7 +114,7 @@ def test_shared_memory_and_memory_files_count_against_the_limit(tmp_path, monkey
     """600 MB of shared anonymous memory in a child and 900 MB in memory files held open, against a 1.2 GB cap:
     before, the guard saw neither (the red team held 7.4 GB under a 4 GB cap)."""
     stubs, seconds, _ = _grade_fx(tmp_path, monkeypatch, SHARED_AND_MEMORY_FILES, memory_bytes=int(1.2 * 2**30))
-    _stopped_for(stubs, "GB of memory, counting every process")
+    _assert_stopped_for(stubs, "GB of memory, counting every process")
     assert seconds < 40
 
 
@@ -199,7 +199,7 @@ def test_a_tree_that_keeps_several_cpus_busy_is_stopped(tmp_path, monkeypatch):
     """Four busy loops started by a stub that then waits: the tree is stopped within seconds, well before the
     test's time limit, and the next stub is graded in a fresh worker."""
     stubs, seconds, _ = _grade_fx(tmp_path, monkeypatch, BUSY_LOOPS)
-    _stopped_for(stubs, "several processes or threads computing at once")
+    _assert_stopped_for(stubs, "several processes or threads computing at once")
     assert seconds < 30
 
 
@@ -242,4 +242,4 @@ def test_a_worker_that_floods_its_output_stops_being_read_and_times_out(tmp_path
 
     monkeypatch.setattr(supervisor, "OUTPUT_READ_BYTES", 8 * 2**20)  # the same rule, reached sooner
     stubs, _, _ = _grade_fx(tmp_path, monkeypatch, FLOOD, call_seconds=3, test_seconds=4)
-    _stopped_for(stubs, "which the grader stopped reading")
+    _assert_stopped_for(stubs, "which the grader stopped reading")

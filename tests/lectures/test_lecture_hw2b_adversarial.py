@@ -16,6 +16,7 @@ from scipy.optimize import minimize
 from scipy.spatial.distance import jensenshannon
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lecture_checks import discounted_soft_vi  # noqa: E402
 from lecture_links import checks  # noqa: E402
 
 from rlcourse.adversarial import sample_transitions  # noqa: E402
@@ -139,15 +140,6 @@ def soft_optimal_policy(P, reward, horizon, gamma=1.0):
         v = np.logaddexp.reduce(q, axis=1)
         policy[t] = np.exp(q - v[:, None])
     return policy
-
-
-def discounted_soft_vi(P, reward_sa, gamma, n_iter=3000):
-    """Infinite-horizon discounted soft value iteration: (V, log pi)."""
-    v = np.zeros(P.shape[0])
-    for _ in range(n_iter):
-        q = reward_sa + gamma * P @ v
-        v = np.logaddexp.reduce(q, axis=1)
-    return v, q - v[:, None]
 
 
 @checks("eq-airl-f", "1d1abe23")

@@ -32,6 +32,7 @@ from scipy.special import expit, log_expit
 from scipy.stats import norm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lecture_checks import discounted_soft_vi  # noqa: E402
 from lecture_links import checks  # noqa: E402
 
 from rlcourse import group_rl as G  # noqa: E402
@@ -100,14 +101,6 @@ def ring(n_states, n_actions, slip):
             for b in range(n_actions):
                 P[s, a, (s + b) % n_states] += slip / n_actions
     return P
-
-
-def discounted_soft_vi(P, reward_sa, gamma, n_iter=2000):
-    v = np.zeros(P.shape[0])
-    for _ in range(n_iter):
-        q = reward_sa + gamma * P @ v
-        v = np.logaddexp.reduce(q, axis=1)
-    return v, q - v[:, None]
 
 
 def fit_shaped_f(P, log_pi, weight, gamma):
