@@ -718,7 +718,7 @@ def sync(assignment: str, folder: Path, results_dir: Path, course_root: Path | N
                 if notebook is not None:
                     atomic_write(place, nbformat.writes(notebook))
                     report.placed.append(place)
-            students[name] = [p.student_id for p in submitters]
+            students[name] = [p.student_id for p in submitters if owner.get(p.student_id, name) == name]
     _write_not_recorded(Path(coursedir.root), assignment, failed, {s for _, s in report.recorded})
     atomic_write(results_dir / STUDENTS_NAME, json.dumps({**read_students(results_dir), **students}, indent=1,
                                                          sort_keys=True))

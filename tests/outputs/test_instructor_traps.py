@@ -250,3 +250,5 @@ submission_2:
     assert grades_of(root, "1001")["scaled_sum"] == (3, None, False), "the newer submission, graded 7/7"
     (warning,) = [w for w in report.warnings() if "named by 2 submissions" in w]
     assert "submission_1" in warning and "submission_2" in warning
+    students = json.loads((out / "_students.json").read_text())
+    assert students["submission_1"] == ["1001"] and students["submission_2"] == [], "feedback goes from the one recorded"
