@@ -129,12 +129,15 @@ def grpo_binary_update(p: float, g: int) -> float:
 
 
 def test_small_groups_blunt_grpos_reweighting_by_the_factors_the_lecture_quotes():
-    """Section "What the normalisations do": the update over the true gradient p(1-p) at G = 4 and 64, as quoted,
-    against a Monte Carlo of GRPO's own advantages; it approaches 1/sqrt(p(1-p)) only as G grows."""
-    text = (Path(__file__).resolve().parents[2] / "lectures" / "08_group_rl.md").read_text()
+    """Section "What the normalisations do": the update over the true gradient p(1-p) at G = 4 and 64, as quoted
+    there (and, for G = 4, in chapter 9's binary groups), against a Monte Carlo of GRPO's own advantages; it
+    approaches 1/sqrt(p(1-p)) only as G grows."""
+    lectures = Path(__file__).resolve().parents[2] / "lectures"
+    chapter_8, chapter_9 = (lectures / "08_group_rl.md").read_text(), (lectures / "09_verifiers.md").read_text()
     for g, quoted in ((4, {0.1: "1.46", 0.5: "1.40"}), (64, {0.1: "3.23", 0.5: "1.97"})):
         for p, figure in quoted.items():
-            assert f"{grpo_binary_update(p, g) / (p * (1 - p)):.2f}" == figure and f"${figure}$" in text
+            assert f"{grpo_binary_update(p, g) / (p * (1 - p)):.2f}" == figure and f"${figure}$" in chapter_8
+            assert g != 4 or f"${figure}$ at $p = {p}$" in chapter_9
     rng = np.random.default_rng(0)
     y = (rng.random((200_000, 4)) < 0.1).astype(float)               # groups of four passes and fails at p = 0.1
     s = y.std(axis=1, ddof=1, keepdims=True)
